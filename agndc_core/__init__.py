@@ -1,0 +1,16 @@
+"""AGNDC Remesher core: binary voxel grids to triangle meshes (bpy-free).
+
+Public API (re-exports only)."""
+
+from .errors import AGNDCError, GridError, GridFileError, MeshError, ModelError, NotBuiltError
+from .grid import VoxelGrid
+
+__all__ = [
+    "AGNDCError",
+    "GridError",
+    "GridFileError",
+    "MeshError",
+    "ModelError",
+    "NotBuiltError",
+    "VoxelGrid",
+]

@@ -1,0 +1,26 @@
+"""Every numeric tolerance of the package, named in one place with the reason for its value.
+
+Tests switch ``tol.strict`` on to enable extra self-checks (as trimesh does)."""
+
+from dataclasses import dataclass
+
+
+@dataclass
+class Tolerances:
+    # offsets of the parity rays from lattice lines, in grid units: irrational-looking so that rays
+    # never pass exactly through mesh vertices or edges of axis-aligned CAD parts
+    ray_jitter: tuple = (1.3717e-5, 2.9311e-5)
+    # Tikhonov pull of the QEF towards the mass point of the cell's samples (UNDC uses 1e-6 then
+    # grows it until the vertex is inside the cell); relative to the QEF's trace
+    qef_pull: float = 1e-6
+    # QEF eigenvalues below this fraction of the largest are treated as zero (flat or edge cells)
+    qef_singular: float = 0.05
+    # two contoured vertices closer than this (grid units) are merged when merging is requested
+    merge: float = 1e-6
+    # a cell counts as "containing" a sample if it is inside the cell dilated by this (grid units)
+    cell_slack: float = 1e-9
+    # when True, internal invariants are checked at run time (slower; tests switch it on)
+    strict: bool = False
+
+
+tol = Tolerances()
