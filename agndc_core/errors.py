@@ -25,3 +25,7 @@ class ModelError(AGNDCError):
 
 class NotBuiltError(AGNDCError):
     """A method or feature that this version does not provide yet."""
+
+
+class CancelledError(AGNDCError):
+    """The user cancelled a long operation (Esc in Blender, Ctrl-C in the CLI)."""

@@ -31,6 +31,9 @@ import numpy as np
 from .errors import GridError
 
 LATTICE_PAD = 1  # empty layers added on the low side before contouring
+#: the lattice is always padded for a cascade this deep (the paper's j = 2), whatever the method,
+#: so every method and the labels see the same lattice
+CASCADE_LEVELS = 2
 
 #: Largest grid the remesher accepts, in voxels (512^3 plus room for non-cubic shapes).
 MAX_VOXELS = 600 * 600 * 600
@@ -134,7 +137,7 @@ def as_occupancy(array, name: str = "array") -> np.ndarray:
     return np.ascontiguousarray(grid != 0)
 
 
-def pad_to_lattice(occupancy: np.ndarray, levels: int = 2) -> np.ndarray:
+def pad_to_lattice(occupancy: np.ndarray, levels: int = CASCADE_LEVELS) -> np.ndarray:
     """Pad an (X, Y, Z) bool grid into the dual-contouring lattice.
 
     ``LATTICE_PAD`` empty layers go on the low side and at least one on the high side, more to

@@ -1,0 +1,170 @@
+"""``agndc`` command line: remesh, eval, demo, train.
+
+Every user-facing failure is an ``AGNDCError``; the CLI prints its message and exits with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .errors import AGNDCError
+from .pipeline import METHODS, TOPOLOGIES
+
+
+def main(argv=None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not hasattr(args, "func"):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except AGNDCError as exc:
+        print(f"agndc: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("agndc: cancelled", file=sys.stderr)
+        return 130
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="agndc", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers()
+
+    p = sub.add_parser("remesh", help="reconstruct a mesh from a grid file or a mesh")
+    p.add_argument("input", type=Path, help="mesh (.obj .ply .stl .glb .off) or grid "
+                   "(.npy .npz .binvox .vox .nii .nii.gz)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output .obj/.ply/.stl/.glb")
+    p.add_argument("--method", choices=METHODS, default="agndc")
+    p.add_argument("--res", type=int, default=64, help="voxels on the longest side (mesh input)")
+    p.add_argument("--checkpoint", type=Path, help="weights (.safetensors); default: shipped")
+    p.add_argument("--topology", choices=TOPOLOGIES, default="input")
+    p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
+    p.add_argument("--threads", type=int, help="CPU threads for the network")
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
+    p.add_argument("--min-component-faces", type=int, default=0)
+    p.set_defaults(func=_cmd_remesh)
+
+    p = sub.add_parser("eval", help="evaluate methods on a folder of meshes (CSV + markdown)")
+    p.add_argument("folder", type=Path)
+    p.add_argument("-o", "--out", type=Path, default=Path("out/eval"))
+    p.add_argument("--methods", default="mc,oracle", help=f"comma list of {','.join(METHODS)}")
+    p.add_argument("--res", type=int, default=64)
+    p.add_argument("--samples", type=int, default=100_000)
+    p.add_argument("--limit", type=int, help="only the first N meshes")
+    p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("demo", help="generate a CAD part, voxelise, reconstruct, compare")
+    p.add_argument("-o", "--out", type=Path, default=Path("out/demo"))
+    p.add_argument("--seed", type=int, default=7)
+    p.add_argument("--res", type=int, default=64)
+    p.set_defaults(func=_cmd_demo)
+
+    try:
+        from .training.cli import add_train_parser
+    except ImportError:  # training code is not shipped inside the Blender extension
+        add_train_parser = None
+    if add_train_parser is not None:
+        add_train_parser(sub)
+    return parser
+
+
+def _progress_bar(desc: str):
+    """A tqdm bar driven by remesh's progress(fraction, message) callback."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=100, desc=desc, unit="%", bar_format="{l_bar}{bar}| {postfix}")
+
+    def update(fraction: float, message: str) -> None:
+        bar.n = int(round(100 * fraction))
+        bar.set_postfix_str(message)
+        bar.refresh()
+
+    return bar, update
+
+
+def _cmd_remesh(args) -> int:
+    from .gridio import is_grid_path, load_grid, load_mesh, save_mesh
+    from .pipeline import remesh, remesh_mesh
+
+    bar, update = _progress_bar(args.input.name)
+    options = dict(method=args.method, checkpoint=args.checkpoint, threads=args.threads,
+                   topology=args.topology, device=args.device, progress=update,
+                   min_component_faces=args.min_component_faces)
+    try:
+        if is_grid_path(args.input):
+            if args.method == "oracle":
+                raise AGNDCError("the oracle needs a mesh as input, not a grid")
+            result = remesh(load_grid(args.input, model_index=args.model_index), **options)
+        else:
+            vertices, faces = load_mesh(args.input)
+            result = remesh_mesh(vertices, faces, resolution=args.res, source=args.input.name,
+                                 **options)
+    finally:
+        bar.close()
+    save_mesh(result.vertices, result.faces, args.output)
+    stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
+    print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces, "
+          f"{result.method}, {result.seconds:.2f} s ({stages})")
+    return 0
+
+
+def _cmd_eval(args) -> int:
+    from .evaluate import evaluate_meshes, find_meshes, markdown_table, summarize_rows, write_report
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
+    meshes = find_meshes(args.folder)[: args.limit]
+    if not meshes:
+        raise AGNDCError(f"{args.folder}: no meshes found")
+    rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples)
+    written = write_report(rows, args.out)
+    print(markdown_table(summarize_rows(rows)))
+    print("written: " + ", ".join(str(p) for p in written.values()))
+    return 1 if any(r["error"] for r in rows) else 0
+
+
+def _cmd_demo(args) -> int:
+    from .evaluate import markdown_table, summarize_rows
+    from .gridio import save_grid, save_mesh
+    from .metrics import evaluate
+    from .pipeline import remesh_mesh
+    from .shapes import generate_shape
+
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    vertices, faces = generate_shape(args.seed)
+    save_mesh(vertices, faces, out / "part.obj")
+    methods = ["mc", "oracle"] + [m for m in ("undc", "agndc") if _has_weights(m)]
+    rows = []
+    for method in methods:
+        result = remesh_mesh(vertices, faces, resolution=args.res, method=method, source="part")
+        save_mesh(result.vertices, result.faces, out / f"part_{method}.obj")
+        metrics = evaluate(result.vertices, result.faces, vertices, faces)
+        rows.append({"method": method, **metrics, "seconds": result.seconds})
+        if method == "mc":
+            save_grid(result.grid, out / "part_grid.npz")
+    print(f"CAD part (seed {args.seed}) voxelised at {args.res}³, written to {out}/")
+    print(markdown_table(summarize_rows(rows)))
+    missing = [m for m in ("agndc", "undc") if m not in methods]
+    if missing:
+        print(f"note: no shipped weights for {', '.join(missing)}; train with `agndc train`")
+    return 0
+
+
+def _has_weights(method: str) -> bool:
+    from .checkpoint import default_checkpoint_path
+    from .pipeline import CHECKPOINT_NAMES
+
+    try:
+        return Path(default_checkpoint_path(CHECKPOINT_NAMES[method])).exists()
+    except AGNDCError:
+        return False
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""Evaluate reconstruction methods on a folder of meshes: one row per (mesh, method), as in UNDC.
+
+Every mesh is voxelised at the chosen resolution; each method reconstructs that same grid, and
+the metrics compare the result with the original mesh in the original mesh's normalised frame.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .errors import AGNDCError
+from .pipeline import remesh_mesh
+
+METRIC_COLUMNS = ("cd", "f1", "nc", "ecd", "ef1")
+HEADERS = {"cd": "CD×10⁵ ↓", "f1": "F1 ↑", "nc": "NC ↑", "ecd": "ECD×10² ↓", "ef1": "EF1 ↑"}
+#: MANIFEST.csv "kind" -> report category
+CATEGORIES = {"cad": "CAD", "organic": "organic", "print (Thingi10K)": "Thingi10K"}
+
+
+def find_meshes(folder: Path) -> list[tuple[Path, str]]:
+    """Meshes under ``folder`` with their category, from MANIFEST.csv when there is one."""
+    from .gridio import is_mesh_path
+
+    folder = Path(folder)
+    if folder.is_file():
+        return [(folder, "mesh")]
+    manifest = folder / "MANIFEST.csv"
+    if manifest.exists():
+        with open(manifest, newline="") as handle:
+            rows = list(csv.DictReader(handle))
+        found = [(folder / r["file"], CATEGORIES.get(r.get("kind", ""), r.get("kind", "other")))
+                 for r in rows if is_mesh_path(r["file"])]
+        return [(path, kind) for path, kind in found if path.exists()]
+    return [(p, "mesh") for p in sorted(folder.rglob("*")) if p.is_file() and is_mesh_path(p)]
+
+
+def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkpoints=None,
+                    progress=True) -> list[dict]:
+    """Rows of metrics (raw, not scaled) for every mesh and method; failures become error rows."""
+    from tqdm import tqdm
+
+    from .gridio import load_mesh
+    from .metrics import evaluate
+
+    checkpoints = checkpoints or {}
+    rows = []
+    jobs = [(path, kind, method) for path, kind in meshes for method in methods]
+    bar = tqdm(jobs, desc="eval", unit="run", disable=not progress)
+    cache = {}
+    for path, kind, method in bar:
+        bar.set_postfix_str(f"{Path(path).name} {method}")
+        row = {"mesh": str(path), "name": Path(path).stem, "category": kind, "method": method,
+               "resolution": resolution}
+        try:
+            if path not in cache:
+                cache = {path: load_mesh(path)}
+            vertices, faces = cache[path]
+            result = remesh_mesh(vertices, faces, resolution=resolution, method=method,
+                                 checkpoint=checkpoints.get(method), source=Path(path).name)
+            start = time.perf_counter()
+            metrics = evaluate(result.vertices, result.faces, vertices, faces, n_samples=n_samples)
+            row.update({k: metrics[k] for k in METRIC_COLUMNS})
+            row.update(faces=len(result.faces), seconds=result.seconds,
+                       metric_seconds=time.perf_counter() - start, error="")
+        except AGNDCError as exc:
+            row.update({k: math.nan for k in METRIC_COLUMNS}, faces=0, seconds=math.nan,
+                       error=str(exc))
+        rows.append(row)
+    return rows
+
+
+def summarize_rows(rows, by=("method",)) -> list[dict]:
+    """Nan-aware means of the metrics per group (ECD/EF1 skip shapes without GT edges)."""
+    groups: dict[tuple, list] = {}
+    for row in rows:
+        groups.setdefault(tuple(row[k] for k in by), []).append(row)
+    out = []
+    for key, members in groups.items():
+        summary = dict(zip(by, key))
+        summary["shapes"] = len(members)
+        for column in METRIC_COLUMNS + ("seconds",):
+            values = np.array([m[column] for m in members], dtype=float)
+            values = values[np.isfinite(values)]
+            summary[column] = float(values.mean()) if values.size else math.nan
+        out.append(summary)
+    return out
+
+
+def markdown_table(summaries, first="method") -> str:
+    """Paper-style table: CD×10⁵, F1, NC, ECD×10², EF1 (and seconds)."""
+    from .metrics import REPORT_SCALE
+
+    head = [first, "shapes"] + [HEADERS[c] for c in METRIC_COLUMNS] + ["time s"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for s in summaries:
+        cells = [str(s[first]), str(s["shapes"])]
+        for column in METRIC_COLUMNS:
+            value = s[column] * REPORT_SCALE.get(column, 1.0)
+            cells.append("–" if math.isnan(value) else f"{value:.3f}")
+        cells.append("–" if math.isnan(s["seconds"]) else f"{s['seconds']:.2f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_report(rows, out_dir: Path) -> dict[str, Path]:
+    """Write rows.csv plus one markdown table per method (per category and overall)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = {"csv": out_dir / "rows.csv"}
+    with open(written["csv"], "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0].keys()))
+        writer.writeheader()
+        writer.writerows(rows)
+    methods = sorted({r["method"] for r in rows}, key=[r["method"] for r in rows].index)
+    for method in methods:
+        mine = [r for r in rows if r["method"] == method]
+        text = f"# {method} at {mine[0]['resolution']}³\n\n"
+        text += markdown_table(summarize_rows(mine, by=("category",)), first="category") + "\n\n"
+        text += markdown_table(summarize_rows(mine)) + "\n"
+        errors = [r for r in mine if r["error"]]
+        if errors:
+            text += "\nFailures:\n" + "".join(f"- {r['name']}: {r['error']}\n" for r in errors)
+        written[method] = out_dir / f"{method}.md"
+        written[method].write_text(text)
+    return written

@@ -1,0 +1,230 @@
+"""Ground-truth labels (UNDC style) from a mesh, at every scale of the cascade.
+
+For each scale s the labels live on that scale's lattice (grid.py, ``scale_lattice``):
+
+* ``inside``  (D,) bool     exact inside/outside of the true solid at the lattice points;
+* ``edge``    (D, 3) bool   the edge leaving point p along +axis crosses the surface, i.e. its two
+                            end points differ (the crossing parity, which is what a watertight
+                            dual-contoured surface can represent);
+* ``surface`` (D,) bool     cells with at least one crossed edge among their 12 edges;
+* ``vertex``  (D, 3) float32 the dual vertex of each surface cell as an offset in [0, 1]^3 from
+                            its min corner (0 elsewhere; masked from the loss by ``surface``).
+
+The vertex of a cell minimises the quadratic error of the planes of the true surface samples that
+fall inside the cell (a QEF, as in dual contouring), solved with truncated eigenvalues about the
+samples' mass point so flat and edge cells stay well posed; a solution outside the cell is pulled
+back along the segment towards the mass point (UNDC grows a Tikhonov pull until the vertex is
+inside, which has the same effect). Samples come from a deterministic barycentric subdivision of
+every triangle, dense enough for ``SAMPLES_PER_CELL`` samples along a cell side at the finest
+scale, and include every triangle's corners with that triangle's normal, so sharp corners and
+creases are represented in the cells that hold them.
+
+At scale 0 ``inside`` equals the voxelisation of the mesh (same rays, same frame), so the input
+grid and the labels agree exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .grid import CASCADE_LEVELS, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
+from .tolerances import tol
+from .voxelize import _choose_rule, check_mesh, inside_points
+
+SAMPLES_PER_CELL = 4  # samples along one side of a finest-scale cell: 16 per cell of flat surface
+
+
+@dataclass
+class ScaleLabels:
+    """Labels of one scale; all arrays share the lattice shape D = (Dx, Dy, Dz)."""
+
+    inside: np.ndarray  # (D) bool
+    edge: np.ndarray  # (D, 3) bool
+    surface: np.ndarray  # (D) bool
+    vertex: np.ndarray  # (D, 3) float32 in [0, 1]
+
+
+def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[ScaleLabels]:
+    """Labels of scales 0..levels for a mesh voxelised into ``grid``.
+
+    Args:
+        vertices: (V, 3) float world coordinates; faces: (F, 3) int.
+        grid: the voxel grid (its affine places the lattice in world space).
+        levels: number of coarser scales (the paper's j).
+
+    Returns:
+        list of ScaleLabels, index = scale; scale s has lattice shape D0 / 2**s.
+    """
+    vertices, faces = check_mesh(vertices, faces)
+    dims0 = np.array(pad_to_lattice(np.zeros(grid.shape, bool), max(levels, CASCADE_LEVELS)).shape)
+    rule = _choose_rule(faces, "auto")
+    # fine lattice coordinates: voxel index + pad
+    fine = grid.world_to_index(vertices) + LATTICE_PAD
+    points, normals = surface_samples(fine[faces], spacing=1.0 / SAMPLES_PER_CELL)
+    labels = []
+    for level in range(levels + 1):
+        offset, spacing = scale_lattice(level)
+        dims = tuple(int(d) for d in dims0 // 2**level)
+        frame = (fine - offset) / spacing
+        inside = inside_points(frame[faces], dims, rule=rule)
+        edge = crossed_edges(inside)
+        surface = surface_cells(edge)
+        vertex = cell_vertices((points - offset) / spacing, normals, surface, frame, faces)
+        labels.append(ScaleLabels(inside, edge, surface, vertex))
+    return labels
+
+
+def crossed_edges(inside: np.ndarray) -> np.ndarray:
+    """(D) bool -> (D, 3) bool: edge p -> p + e_axis joins an inside and an outside point."""
+    edge = np.zeros(inside.shape + (3,), dtype=bool)
+    edge[:-1, :, :, 0] = inside[:-1] != inside[1:]
+    edge[:, :-1, :, 1] = inside[:, :-1] != inside[:, 1:]
+    edge[:, :, :-1, 2] = inside[:, :, :-1] != inside[:, :, 1:]
+    return edge
+
+
+def surface_cells(edge: np.ndarray) -> np.ndarray:
+    """(D, 3) bool edges -> (D) bool cells having any crossed edge among their 12.
+
+    Cell c's x-edges start at c, c+e_y, c+e_z, c+e_y+e_z (likewise for y and z), so a crossed
+    edge at point p marks the cells p, p - e_b, p - e_c, p - e_b - e_c for its two other axes.
+    """
+    cells = np.zeros(edge.shape[:3], dtype=bool)
+    for axis in range(3):
+        marked = edge[..., axis]
+        b, c = (axis + 1) % 3, (axis + 2) % 3
+        for shift_b in (0, 1):
+            for shift_c in (0, 1):
+                source = [slice(None)] * 3
+                target = [slice(None)] * 3
+                source[b] = slice(shift_b, None)
+                target[b] = slice(0, marked.shape[b] - shift_b)
+                source[c] = slice(shift_c, None)
+                target[c] = slice(0, marked.shape[c] - shift_c)
+                cells[tuple(target)] |= marked[tuple(source)]
+    cells[-1, :, :] = cells[:, -1, :] = cells[:, :, -1] = False  # cells need their far corner
+    return cells
+
+
+def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Deterministic samples of a triangle soup, at most ``spacing`` apart, with face normals.
+
+    Each triangle is cut into k x k similar sub-triangles (k from its longest edge) and sampled at
+    the (k+1)(k+2)/2 corners of that subdivision, so its own corners and edges are included.
+
+    Returns:
+        points: (S, 3) float64; normals: (S, 3) float64 unit normals (degenerate faces dropped).
+    """
+    tri = np.asarray(triangles_fx3x3, dtype=np.float64)
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    keep = area2 > 1e-12
+    tri, normal = tri[keep], cross[keep] / area2[keep, None]
+    longest = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).max(axis=1)
+    steps = np.maximum(np.ceil(longest / spacing).astype(np.int64), 1)
+    points, normals = [], []
+    for k in np.unique(steps):
+        group = np.nonzero(steps == k)[0]
+        weights = _barycentric_lattice(int(k))  # (m, 3)
+        # (G, m, 3): every group triangle at every barycentric point
+        group_points = np.einsum("mi,gid->gmd", weights, tri[group])
+        points.append(group_points.reshape(-1, 3))
+        normals.append(np.repeat(normal[group], len(weights), axis=0))
+    if not points:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate(points), np.concatenate(normals)
+
+
+def _barycentric_lattice(k: int) -> np.ndarray:
+    """(m, 3) barycentric weights of the corners of a k x k subdivision, m = (k+1)(k+2)/2."""
+    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+    valid = i + j <= k
+    i, j = i[valid], j[valid]
+    return np.stack([k - i - j, i, j], axis=1).astype(np.float64) / k
+
+
+def cell_vertices(points, normals, surface, frame_vertices, faces) -> np.ndarray:
+    """QEF vertex of every surface cell, as an offset from the cell's min corner.
+
+    Args:
+        points, normals: (S, 3) samples in the scale's lattice frame (points at integer corners).
+        surface: (D) bool surface cells.
+        frame_vertices, faces: the mesh in the same frame, for cells that got no sample.
+
+    Returns:
+        (D, 3) float32 offsets in [0, 1]; zero outside ``surface``.
+    """
+    dims = np.array(surface.shape)
+    cell = np.floor(points).astype(np.int64)
+    inside_box = np.all((cell >= 0) & (cell < dims), axis=1)
+    cell, points, normals = cell[inside_box], points[inside_box], normals[inside_box]
+    flat = np.ravel_multi_index(cell.T, surface.shape)
+    on_surface = surface.reshape(-1)[flat]
+    flat, points, normals = flat[on_surface], points[on_surface], normals[on_surface]
+    # compact surface-cell ids so the accumulators are small
+    surface_flat = np.flatnonzero(surface)
+    slot = np.searchsorted(surface_flat, flat)
+    corners = np.stack(np.unravel_index(surface_flat, surface.shape), axis=1).astype(np.float64)
+    position = _solve_qef(slot, points, normals, corners)
+    empty = np.isnan(position[:, 0])
+    if np.any(empty):
+        position[empty] = _closest_surface_points(corners[empty] + 0.5, frame_vertices, faces)
+    offsets = np.clip(position - corners, 0.0, 1.0)
+    vertex = np.zeros(surface.shape + (3,), dtype=np.float32)
+    vertex.reshape(-1, 3)[surface_flat] = offsets
+    return vertex
+
+
+def _solve_qef(slot, points, normals, corners) -> np.ndarray:
+    """Per-cell QEF minimiser (n_cells, 3); NaN rows for cells without samples.
+
+    Args:
+        slot: (S,) int cell id of each sample; points, normals: (S, 3);
+        corners: (n_cells, 3) float min corner of each cell.
+    """
+    n_cells = len(corners)
+    count = np.bincount(slot, minlength=n_cells).astype(np.float64)
+    mass = np.stack([np.bincount(slot, points[:, d], n_cells) for d in range(3)], axis=1)
+    has = count > 0
+    mass[has] /= count[has, None]
+    # planes relative to the mass point: minimise sum (n . (x - m) - n . (p - m))^2
+    rel = points - mass[slot]
+    dist = np.einsum("sd,sd->s", normals, rel)
+    ata = np.zeros((n_cells, 3, 3))
+    atb = np.zeros((n_cells, 3))
+    for r in range(3):
+        atb[:, r] = np.bincount(slot, normals[:, r] * dist, n_cells)
+        for c in range(r, 3):
+            ata[:, r, c] = ata[:, c, r] = np.bincount(slot, normals[:, r] * normals[:, c], n_cells)
+    ata += tol.qef_pull * np.trace(ata, axis1=1, axis2=2)[:, None, None] * np.eye(3)
+    eigval, eigvec = np.linalg.eigh(ata)  # ascending eigenvalues
+    keep = eigval > tol.qef_singular * eigval[:, 2:3]
+    inverse = np.where(keep, 1.0 / np.where(keep, eigval, 1.0), 0.0)
+    projected = np.einsum("ndk,nd->nk", eigvec, atb) * inverse
+    position = mass + np.einsum("ndk,nk->nd", eigvec, projected)
+    position = _pull_into_cells(position, mass, corners)
+    position[~has] = np.nan
+    return position
+
+
+def _pull_into_cells(position, mass, corner) -> np.ndarray:
+    """Move each position along the segment from its mass point until it lies in its cell."""
+    lo, hi = corner - tol.cell_slack, corner + 1 + tol.cell_slack
+    step = position - mass
+    with np.errstate(divide="ignore", invalid="ignore"):
+        limit_hi = np.where(step > 0, (hi - mass) / step, np.inf)
+        limit_lo = np.where(step < 0, (lo - mass) / step, np.inf)
+    t = np.clip(np.minimum(limit_hi, limit_lo).min(axis=1), 0.0, 1.0)
+    t = np.nan_to_num(t, nan=0.0)
+    return mass + step * t[:, None]
+
+
+def _closest_surface_points(queries, frame_vertices, faces) -> np.ndarray:
+    """(Q, 3) closest points on the mesh; used only for the rare cells no sample fell into."""
+    import trimesh  # only needed on this rare path
+
+    mesh = trimesh.Trimesh(frame_vertices, faces, process=False)
+    closest, _, _ = trimesh.proximity.closest_point(mesh, queries)
+    return closest

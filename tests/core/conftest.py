@@ -1,0 +1,62 @@
+"""Shared fixtures and analytic shapes for the core tests (the trimesh `generic` habit)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from agndc_core.tolerances import tol
+
+REPO = Path(__file__).resolve().parents[2]
+SHARED = REPO.parent / "shared"
+DEV_DATA = SHARED / "data" / "dev"
+
+
+@pytest.fixture(autouse=True)
+def strict_tolerances():
+    """Switch on the library's internal self-checks for every test."""
+    tol.strict = True
+    yield
+    tol.strict = False
+
+
+def rotation(angle, axis):
+    return trimesh.transformations.rotation_matrix(angle, axis)
+
+
+def box(extents=(1.0, 0.6, 0.4), transform=None) -> trimesh.Trimesh:
+    mesh = trimesh.creation.box(extents)
+    if transform is not None:
+        mesh.apply_transform(transform)
+    return mesh
+
+
+def sphere(radius=0.5, subdivisions=5) -> trimesh.Trimesh:
+    return trimesh.creation.icosphere(subdivisions, radius)
+
+
+def cylinder_with_hole(radius=0.5, hole=0.2, height=0.6, sections=96) -> trimesh.Trimesh:
+    """A thick washer (genus 1) built with manifold3d, so it is exactly watertight."""
+    from manifold3d import Manifold
+
+    outer = Manifold.cylinder(height, radius, radius, sections, True)
+    inner = Manifold.cylinder(height * 2, hole, hole, sections, True)
+    mesh = (outer - inner).to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts))
+
+
+def edge_use_counts(faces) -> np.ndarray:
+    """How many faces use each undirected edge."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, counts = np.unique(edges, axis=0, return_counts=True)
+    return counts
+
+
+def dev_mesh_paths():
+    """Meshes of ../shared/data/dev (skips the test when the folder is missing)."""
+    if not DEV_DATA.exists():
+        pytest.skip("../shared/data/dev is not beside the checkout")
+    from agndc_core.evaluate import find_meshes
+
+    return find_meshes(DEV_DATA)

@@ -1,0 +1,70 @@
+import numpy as np
+import pytest
+import trimesh
+
+from agndc_core import MeshError
+from agndc_core.voxelize import voxelize
+
+from conftest import box, cylinder_with_hole, rotation, sphere
+
+
+def test_axis_aligned_box_faces_within_a_voxel():
+    mesh = box((1.0, 0.5, 0.3))
+    grid = voxelize(mesh.vertices, mesh.faces, 40)
+    centres = grid.index_to_world(np.argwhere(grid.occupancy))
+    h = grid.voxel_size[0]
+    # occupied voxel centres stay inside the box, and reach to within one voxel of each face
+    assert np.all(np.abs(centres) <= np.array([0.5, 0.25, 0.15]) + 1e-9)
+    assert np.all(np.abs(centres).max(axis=0) >= np.array([0.5, 0.25, 0.15]) - h)
+
+
+@pytest.mark.parametrize("make", [lambda: box(transform=rotation(0.5, [1, 1, 0])),
+                                  lambda: sphere(), cylinder_with_hole])
+def test_volume_matches(make):
+    mesh = make()
+    grid = voxelize(mesh.vertices, mesh.faces, 64)
+    volume = grid.occupancy.sum() * grid.voxel_size.prod()
+    assert abs(volume - mesh.volume) / mesh.volume < 0.02
+
+
+def test_rules_agree_on_closed_mesh_and_holes_are_outvoted():
+    mesh = sphere(subdivisions=4)
+    closed = voxelize(mesh.vertices, mesh.faces, 48).occupancy
+    parity = voxelize(mesh.vertices, mesh.faces, 48, rule="parity").occupancy
+    assert np.array_equal(closed, parity)
+    holed = voxelize(mesh.vertices, mesh.faces[20:], 48).occupancy
+    assert (holed != closed).sum() < 0.01 * closed.sum()
+
+
+def test_inverted_mesh_still_solid():
+    mesh = sphere(subdivisions=3)
+    grid = voxelize(mesh.vertices, mesh.faces[:, ::-1], 32)
+    ref = voxelize(mesh.vertices, mesh.faces, 32)
+    assert np.array_equal(grid.occupancy, ref.occupancy)
+
+
+def test_non_cubic_shape_and_margin():
+    mesh = box((1.0, 0.2, 0.1))
+    grid = voxelize(mesh.vertices, mesh.faces, 50)
+    assert grid.shape[0] == 50 and grid.shape[1] < 20
+    for axis in range(3):
+        assert not grid.occupancy.take(0, axis=axis).any()
+
+
+@pytest.mark.parametrize("vertices, faces, message", [
+    (np.zeros((3, 3)), np.zeros((0, 3), int), "no faces"),
+    (np.zeros((3, 3)), np.array([[0, 1, 2]]), "zero extent"),
+    (np.array([[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), np.array([[0, 1, 2]]), "non-finite"),
+    (np.eye(3), np.array([[0, 1, 5]]), "outside"),
+])
+def test_bad_meshes_are_named(vertices, faces, message):
+    with pytest.raises(MeshError, match=message):
+        voxelize(vertices, faces, 16)
+
+
+def test_matches_trimesh_contains_on_a_small_grid():
+    mesh = box(transform=rotation(0.3, [0, 1, 1]))
+    grid = voxelize(mesh.vertices, mesh.faces, 20)
+    points = grid.index_to_world(np.argwhere(np.ones(grid.shape, bool)))
+    reference = mesh.contains(points).reshape(grid.shape)
+    assert (reference != grid.occupancy).sum() <= 2  # points on the surface may differ
