@@ -14,10 +14,10 @@ The vertex of a cell minimises the quadratic error of the planes of the true sur
 fall inside the cell (a QEF, as in dual contouring), solved with truncated eigenvalues about the
 samples' mass point so flat and edge cells stay well posed; a solution outside the cell is pulled
 back along the segment towards the mass point (UNDC grows a Tikhonov pull until the vertex is
-inside, which has the same effect). Samples come from a deterministic barycentric subdivision of
-every triangle, dense enough for ``SAMPLES_PER_CELL`` samples along a cell side at the finest
-scale, and include every triangle's corners with that triangle's normal, so sharp corners and
-creases are represented in the cells that hold them.
+inside, which has the same effect). Samples are deterministic (a low-discrepancy
+sequence inside each triangle plus points along its edges, ``SAMPLES_PER_CELL`` per cell side)
+and include every triangle's corners with that triangle's normal, so sharp corners and creases
+are represented in the cells that hold them.
 
 At scale 0 ``inside`` equals the voxelisation of the mesh (same rays, same frame), so the input
 grid and the labels agree exactly.
@@ -62,7 +62,6 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[Scale
     rule = _choose_rule(faces, "auto")
     # fine lattice coordinates: voxel index + pad
     fine = grid.world_to_index(vertices) + LATTICE_PAD
-    points, normals = surface_samples(fine[faces], spacing=1.0 / SAMPLES_PER_CELL)
     labels = []
     for level in range(levels + 1):
         offset, spacing = scale_lattice(level)
@@ -71,7 +70,9 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[Scale
         inside = inside_points(frame[faces], dims, rule=rule)
         edge = crossed_edges(inside)
         surface = surface_cells(edge)
-        vertex = cell_vertices((points - offset) / spacing, normals, surface, frame, faces)
+        # sampled per scale, so coarse cells get the same sample density as fine ones
+        points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL)
+        vertex = cell_vertices(points, normals, surface, frame, faces)
         labels.append(ScaleLabels(inside, edge, surface, vertex))
     return labels
 
@@ -109,10 +110,13 @@ def surface_cells(edge: np.ndarray) -> np.ndarray:
 
 
 def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic samples of a triangle soup, at most ``spacing`` apart, with face normals.
+    """Deterministic samples of a triangle soup, about ``spacing`` apart, with face normals.
 
-    Each triangle is cut into k x k similar sub-triangles (k from its longest edge) and sampled at
-    the (k+1)(k+2)/2 corners of that subdivision, so its own corners and edges are included.
+    Two kinds of samples, both per triangle and with that triangle's normal:
+    * interior: ceil(area / spacing^2) points of the R2 low-discrepancy sequence folded into the
+      triangle (even coverage whatever its shape; long slivers get few points);
+    * boundary: points every ``spacing`` along each edge, starting at its first corner, so every
+      corner and crease is sampled by all the faces that meet there.
 
     Returns:
         points: (S, 3) float64; normals: (S, 3) float64 unit normals (degenerate faces dropped).
@@ -121,28 +125,32 @@ def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.nda
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area2 = np.linalg.norm(cross, axis=1)
     keep = area2 > 1e-12
-    tri, normal = tri[keep], cross[keep] / area2[keep, None]
-    longest = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).max(axis=1)
-    steps = np.maximum(np.ceil(longest / spacing).astype(np.int64), 1)
-    points, normals = [], []
-    for k in np.unique(steps):
-        group = np.nonzero(steps == k)[0]
-        weights = _barycentric_lattice(int(k))  # (m, 3)
-        # (G, m, 3): every group triangle at every barycentric point
-        group_points = np.einsum("mi,gid->gmd", weights, tri[group])
-        points.append(group_points.reshape(-1, 3))
-        normals.append(np.repeat(normal[group], len(weights), axis=0))
-    if not points:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    return np.concatenate(points), np.concatenate(normals)
+    tri, normal, area = tri[keep], cross[keep] / area2[keep, None], area2[keep] / 2
+    # interior: R2 sequence (golden ratios of the plastic number) in the unit square, folded
+    count = np.ceil(area / spacing**2).astype(np.int64)
+    owner, local = _enumerate(count)
+    u = (0.5 + local * 0.7548776662466927) % 1.0
+    v = (0.5 + local * 0.5698402909980532) % 1.0
+    fold = u + v > 1
+    u, v = np.where(fold, 1 - u, u), np.where(fold, 1 - v, v)
+    t = tri[owner]
+    interior = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
+    # boundary: along each edge a -> b, points at a + (i / m) (b - a), i = 0 .. m-1
+    start, end = tri.reshape(-1, 3), tri[:, [1, 2, 0]].reshape(-1, 3)
+    steps = np.maximum(np.ceil(np.linalg.norm(end - start, axis=1) / spacing), 1).astype(np.int64)
+    edge_owner, edge_local = _enumerate(steps)
+    fraction = (edge_local / steps[edge_owner])[:, None]
+    boundary = start[edge_owner] + fraction * (end - start)[edge_owner]
+    points = np.concatenate([interior, boundary])
+    normals = np.concatenate([normal[owner], normal[edge_owner // 3]])
+    return points, normals
 
 
-def _barycentric_lattice(k: int) -> np.ndarray:
-    """(m, 3) barycentric weights of the corners of a k x k subdivision, m = (k+1)(k+2)/2."""
-    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
-    valid = i + j <= k
-    i, j = i[valid], j[valid]
-    return np.stack([k - i - j, i, j], axis=1).astype(np.float64) / k
+def _enumerate(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For counts (n,), the owner (sum,) and the index within its owner (sum,) of every item."""
+    owner = np.repeat(np.arange(len(counts)), counts)
+    local = np.arange(owner.size) - np.repeat(np.cumsum(counts) - counts, counts)
+    return owner, local
 
 
 def cell_vertices(points, normals, surface, frame_vertices, faces) -> np.ndarray:

@@ -27,7 +27,7 @@ RULES = ("auto", "winding", "parity")
 
 
 def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: str = "auto",
-             source: str = "mesh") -> VoxelGrid:
+             shift=(0.0, 0.0, 0.0), source: str = "mesh") -> VoxelGrid:
     """Voxelise a triangle mesh into a binary grid.
 
     Args:
@@ -37,6 +37,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
         margin: empty voxels kept around the shape on every side (counted inside ``resolution``
             on the longest axis), so the outer surface is always closed.
         rule: "auto", "winding" or "parity" (see module docstring).
+        shift: (3,) sub-voxel offset of the grid, in voxels (training augmentation: the same shape
+            seen at different positions relative to the voxel centres).
 
     Returns:
         VoxelGrid whose voxel centres are the sample points; voxel size is the same on all axes.
@@ -49,7 +51,7 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     counts = np.maximum(np.ceil((hi - lo) / voxel - 1e-9).astype(int), 1) + 2 * margin
     counts[np.argmax(hi - lo)] = resolution
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
-    origin = (lo + hi) / 2 - (counts - 1) * voxel / 2
+    origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
     occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule))
     return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source)

@@ -1,0 +1,1 @@
+"""Training code (not shipped in the Blender extension): data generation, per-scale training."""
