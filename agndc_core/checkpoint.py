@@ -1,0 +1,152 @@
+"""Self-describing checkpoints: ``<stem>.safetensors`` (weights) + ``<stem>.json`` (the rest).
+
+The JSON sidecar holds ``format_version``, ``model_config`` (``AGNDCConfig.to_dict``), the
+parameter count, the training recipe, metrics, and the sha256 of the weights file. Loading never
+unpickles: the weights are read with ``safetensors.torch.load_file``, the config with ``json``,
+and both are checked (hash, keys, shapes) before the network is built, so a wrong or damaged file
+gives a ``ModelError`` naming the problem instead of a broken model.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import torch
+
+from .errors import ModelError
+
+FORMAT_VERSION = 1
+#: folder of the shipped weights (trained separately; may not exist in a fresh checkout)
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
+
+def default_checkpoint_path(name: str = "agndc") -> Path:
+    """``agndc_core/weights/<name>.safetensors`` (the shipped checkpoint of a method)."""
+    return WEIGHTS_DIR / f"{name}.safetensors"
+
+
+def save_checkpoint(model, path_stem, *, training: dict, metrics: dict) -> Path:
+    """Write ``<stem>.safetensors`` and ``<stem>.json``; return the weights path.
+
+    Args:
+        model: an ``AGNDCCascade``.
+        path_stem: path without suffix (a ``.safetensors``/``.json`` suffix is dropped).
+        training: the training recipe (JSON-serialisable: data, steps, optimiser, seeds...).
+        metrics: evaluation results (JSON-serialisable).
+    """
+    from safetensors.torch import save_file
+
+    weights, sidecar = _paths(path_stem)
+    state = {k: v.detach().to("cpu").contiguous() for k, v in model.state_dict().items()}
+    meta = {
+        "format_version": FORMAT_VERSION,
+        "model_config": model.config.to_dict(),
+        "parameters": count_parameters(model),
+        "training": training,
+        "metrics": metrics,
+        "weights_file": weights.name,
+    }
+    try:  # fail before writing anything
+        json.dumps(meta)
+    except TypeError as exc:
+        raise ModelError(f"checkpoint metadata is not JSON-serialisable: {exc}") from None
+    weights.parent.mkdir(parents=True, exist_ok=True)
+    save_file(state, str(weights), metadata={"format": "agndc",
+                                             "format_version": str(FORMAT_VERSION)})
+    meta["weights_sha256"] = _sha256(weights)
+    sidecar.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return weights
+
+
+def load_checkpoint(path):
+    """Load a checkpoint written by ``save_checkpoint``.
+
+    Args:
+        path: the ``.safetensors`` file, its ``.json`` sidecar, or their common stem.
+
+    Returns:
+        (AGNDCCascade in eval mode, metadata dict).
+
+    Raises:
+        ModelError: missing files, bad JSON, unknown format version, hash mismatch (corrupt or
+        truncated weights), invalid config, missing/unexpected tensors or wrong shapes.
+    """
+    from safetensors.torch import load_file
+
+    from .nn import AGNDCCascade, AGNDCConfig
+
+    weights, sidecar = _paths(path)
+    if not weights.exists():
+        if weights == default_checkpoint_path(weights.stem):
+            raise ModelError(f"no shipped weights found at {weights}; train with `agndc train` "
+                             "or pass --checkpoint")
+        raise ModelError(f"checkpoint not found: {weights}")
+    if not sidecar.exists():
+        raise ModelError(f"checkpoint {weights} has no metadata file {sidecar.name} beside it")
+    try:
+        meta = json.loads(sidecar.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelError(f"cannot read checkpoint metadata {sidecar}: {exc}") from None
+    if not isinstance(meta, dict) or meta.get("format_version") != FORMAT_VERSION:
+        version = meta.get("format_version") if isinstance(meta, dict) else None
+        raise ModelError(f"{sidecar}: unsupported checkpoint format_version {version!r} "
+                         f"(this version reads {FORMAT_VERSION})")
+    digest = _sha256(weights)
+    if digest != meta.get("weights_sha256"):
+        raise ModelError(f"{weights} is corrupt or was modified: sha256 {digest[:12]}... does not "
+                         f"match the {str(meta.get('weights_sha256'))[:12]}... recorded in "
+                         f"{sidecar.name}")
+    config = AGNDCConfig.from_dict(meta.get("model_config"))
+    model = AGNDCCascade(config)
+    try:
+        state = load_file(str(weights))
+    except Exception as exc:  # safetensors raises its own errors for malformed files
+        raise ModelError(f"cannot read weights {weights}: {exc}") from None
+    _check_state(state, model.state_dict(), weights)
+    model.load_state_dict(state, strict=True)
+    return model.eval(), meta
+
+
+def _check_state(state: dict, expected: dict, weights: Path) -> None:
+    missing = sorted(set(expected) - set(state))
+    unexpected = sorted(set(state) - set(expected))
+    wrong = [f"{k} {tuple(state[k].shape)} != {tuple(v.shape)}" for k, v in expected.items()
+             if k in state and tuple(state[k].shape) != tuple(v.shape)]
+    problems = []
+    if missing:
+        problems.append(f"missing tensors {_few(missing)}")
+    if unexpected:
+        problems.append(f"unexpected tensors {_few(unexpected)}")
+    if wrong:
+        problems.append(f"wrong shapes {_few(wrong)}")
+    if problems:
+        raise ModelError(f"{weights} does not match its model_config: " + "; ".join(problems))
+    for k, v in state.items():
+        if v.dtype != expected[k].dtype:
+            raise ModelError(f"{weights}: tensor {k} has dtype {v.dtype}, expected "
+                             f"{expected[k].dtype}")
+
+
+def _few(items: list, n: int = 4) -> str:
+    return ", ".join(items[:n]) + (f" (+{len(items) - n} more)" if len(items) > n else "")
+
+
+def _paths(path) -> tuple[Path, Path]:
+    path = Path(path)
+    stem = path.with_suffix("") if path.suffix in (".safetensors", ".json") else path
+    return stem.with_name(stem.name + ".safetensors"), stem.with_name(stem.name + ".json")
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def count_parameters(model: torch.nn.Module) -> int:
+    """Number of learnable parameters."""
+    return int(sum(p.numel() for p in model.parameters()))

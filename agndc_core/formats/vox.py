@@ -1,0 +1,122 @@
+"""MagicaVoxel ``.vox`` files (spec: github.com/ephtracy/voxel-model,
+``MagicaVoxel-file-format-vox.txt``).
+
+Layout: ``"VOX "``, int32 version, then one ``MAIN`` chunk whose children hold, per model, a
+``SIZE`` chunk (int32 x, y, z) followed by an ``XYZI`` chunk (int32 n, then n x 4 uint8
+x, y, z, colour index). A chunk is: 4-byte id, int32 content size, int32 children size, content,
+children. Other chunks (``PACK``, palette, materials, scene graph) are skipped.
+
+Every voxel listed in ``XYZI`` is occupied, whatever its colour; colour index 0 (which MagicaVoxel
+never writes and treats as empty) is empty. The scene-graph placement of models is ignored:
+grids load with voxel size 1 and origin 0. Coordinates are uint8, so an axis holds at most 256.
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from ..errors import GridFileError
+from .binvox import guard_size
+
+MAGIC = b"VOX "
+VERSION = 150
+MAX_DIM = 256  # coordinates are stored as one byte each
+CHUNK_HEADER = struct.Struct("<4sii")  # id, content size, children size
+
+
+def read_vox(data: bytes, name: str, model_index: int = 0) -> np.ndarray:
+    """Parse a .vox file and return model ``model_index`` as (X, Y, Z) bool occupancy.
+
+    Raises
+    ------
+    GridFileError
+        Not a .vox file, truncated or inconsistent chunks, or no such model.
+    """
+    if len(data) < 8 or data[:4] != MAGIC:
+        raise GridFileError(f"{name}: not a MagicaVoxel file (it does not start with 'VOX ')")
+    chunk_id, content, children, start = _chunk_at(data, 8, len(data), name)
+    if chunk_id != b"MAIN":
+        raise GridFileError(f"{name}: .vox file has no MAIN chunk (found {chunk_id!r})")
+    models = _models(data, start + content, start + content + children, name)
+    if not models:
+        raise GridFileError(f"{name}: .vox file holds no voxel model (no XYZI chunk)")
+    if not 0 <= model_index < len(models):
+        raise GridFileError(
+            f"{name}: model_index {model_index} is out of range: the file holds "
+            f"{len(models)} model{'s' if len(models) != 1 else ''} (0..{len(models) - 1})"
+        )
+    size, offset, length = models[model_index]
+    return _voxels(data, size, offset, length, name)
+
+
+def write_vox(occupancy: np.ndarray, name: str) -> bytes:
+    """Encode an (X, Y, Z) bool grid as a single-model .vox (colour index 1 everywhere)."""
+    if max(occupancy.shape) > MAX_DIM:
+        raise GridFileError(
+            f"{name}: .vox holds at most {MAX_DIM} voxels per axis, the grid is {occupancy.shape}; "
+            "save as .npz, .binvox or .nii instead"
+        )
+    xyz = np.argwhere(occupancy)  # (N, 3)
+    xyzi = np.concatenate([xyz, np.ones((len(xyz), 1), dtype=xyz.dtype)], axis=1)  # (N, 4)
+    size = _chunk(b"SIZE", struct.pack("<3i", *occupancy.shape))
+    voxels = _chunk(b"XYZI", struct.pack("<i", len(xyz)) + xyzi.astype(np.uint8).tobytes())
+    return MAGIC + struct.pack("<i", VERSION) + _chunk(b"MAIN", b"", size + voxels)
+
+
+def _chunk(chunk_id: bytes, content: bytes, children: bytes = b"") -> bytes:
+    return CHUNK_HEADER.pack(chunk_id, len(content), len(children)) + content + children
+
+
+def _chunk_at(data: bytes, pos: int, end: int, name: str) -> tuple[bytes, int, int, int]:
+    """(id, content size, children size, content start) of the chunk at ``pos``, bounds-checked."""
+    if pos + CHUNK_HEADER.size > end:
+        raise GridFileError(f"{name}: truncated .vox file (chunk header at byte {pos:,})")
+    chunk_id, content, children = CHUNK_HEADER.unpack_from(data, pos)
+    start = pos + CHUNK_HEADER.size
+    if content < 0 or children < 0 or start + content + children > end:
+        raise GridFileError(
+            f"{name}: truncated or corrupt .vox file: chunk {chunk_id!r} at byte {pos:,} claims "
+            f"{content + children:,} bytes, {max(end - start, 0):,} left"
+        )
+    return chunk_id, content, children, start
+
+
+def _models(data: bytes, pos: int, end: int, name: str) -> list[tuple[tuple, int, int]]:
+    """Walk MAIN's children: [(size (3,), XYZI content start, XYZI content length)] per model."""
+    models, size = [], None
+    while pos < end:  # one step per chunk, never per voxel
+        chunk_id, content, children, start = _chunk_at(data, pos, end, name)
+        if chunk_id == b"SIZE":
+            if content < 12:
+                raise GridFileError(f"{name}: corrupt .vox SIZE chunk ({content} bytes)")
+            size = struct.unpack_from("<3i", data, start)
+            if min(size) < 1:
+                raise GridFileError(f"{name}: .vox model size must be positive, got {size}")
+        elif chunk_id == b"XYZI":
+            if size is None:
+                raise GridFileError(f"{name}: corrupt .vox file: XYZI chunk without a SIZE chunk")
+            models.append((size, start, content))
+            size = None
+        pos = start + content + children
+    return models
+
+
+def _voxels(data: bytes, size: tuple, offset: int, length: int, name: str) -> np.ndarray:
+    """Decode one XYZI chunk's content into an occupancy grid of ``size``."""
+    if length < 4:
+        raise GridFileError(f"{name}: truncated .vox XYZI chunk (no voxel count)")
+    count = struct.unpack_from("<i", data, offset)[0]
+    if count < 0 or 4 + 4 * count > length:
+        raise GridFileError(
+            f"{name}: truncated .vox XYZI chunk: {max(length - 4, 0) // 4:,} of {count:,} voxels"
+        )
+    guard_size(size, name)
+    xyzi = np.frombuffer(data, dtype=np.uint8, count=4 * count, offset=offset + 4).reshape(-1, 4)
+    xyz = xyzi[xyzi[:, 3] != 0, :3].astype(np.int64)  # (N, 3), colour 0 = empty
+    if np.any(xyz >= np.asarray(size)):
+        raise GridFileError(f"{name}: corrupt .vox model: voxels lie outside its size {size}")
+    occupancy = np.zeros(size, dtype=bool)
+    occupancy[xyz[:, 0], xyz[:, 1], xyz[:, 2]] = True
+    return occupancy

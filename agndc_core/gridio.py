@@ -1,0 +1,318 @@
+"""Reading and writing voxel grids and meshes: one entry point per direction, chosen by extension.
+
+Grids (``load_grid`` / ``save_grid``):
+
+* ``.npy``: the occupancy array only (bool, or numeric 0/1); loads with voxel size 1, origin 0.
+* ``.npz``: the array named ``occupancy`` (else ``grid``, ``voxels``, ``data``, else the only 3-D
+  array) plus, when present, ``affine`` (4x4) or ``voxel_size`` + ``origin``.
+* ``.binvox`` and MagicaVoxel ``.vox``: see ``agndc_core.formats``.
+* ``.nii`` / ``.nii.gz`` (NIfTI, via nibabel): occupancy is ``data > 0``, so 0/1 masks and label
+  volumes (every non-zero label is solid, negative labels are empty) both work; continuous float
+  volumes are refused (threshold them first). The header's affine is kept, so meshes come out in
+  world units (nibabel's affine maps voxel indices to world exactly like ``VoxelGrid.affine``).
+  NIfTI stores the affine in float32, so a saved affine comes back to about 1e-7 relative.
+
+Meshes (``load_mesh`` / ``save_mesh``) go through trimesh.
+
+Every missing, corrupt, truncated or unsupported file raises ``GridFileError`` with a message
+that names the file; grid *content* problems (non-binary values, wrong shape, too large) are
+``GridError`` from ``grid.py``, and unusable meshes are ``MeshError``.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import struct
+import zipfile
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from .errors import GridFileError
+from .formats.binvox import guard_size, read_binvox, write_binvox
+from .formats.vox import read_vox, write_vox
+from .grid import VoxelGrid
+from .voxelize import check_mesh
+
+GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
+#: meshes ``load_mesh`` reads (trimesh's loaders that need no optional dependency)
+MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
+#: meshes ``save_mesh`` writes
+MESH_SAVE_EXTENSIONS = (".obj", ".ply", ".stl", ".glb")
+#: array names tried in order when reading an .npz
+NPZ_ARRAY_NAMES = ("occupancy", "grid", "voxels", "data")
+#: errors numpy, zipfile and nibabel raise for unreadable files
+_FILE_ERRORS = (OSError, EOFError, ValueError, KeyError, struct.error, zlib.error,
+                zipfile.BadZipFile)
+
+
+def is_grid_path(path) -> bool:
+    """True when ``path`` has a grid extension (``.nii.gz`` included), case-insensitive."""
+    return _extension(path, GRID_EXTENSIONS) is not None
+
+
+def is_mesh_path(path) -> bool:
+    """True when ``path`` has a mesh extension that ``load_mesh`` reads, case-insensitive."""
+    return _extension(path, MESH_EXTENSIONS) is not None
+
+
+def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
+    """Load a voxel grid file.
+
+    Parameters
+    ----------
+    path : str or Path
+        A file with one of ``GRID_EXTENSIONS``.
+    model_index : int
+        Which model of a multi-model MagicaVoxel ``.vox`` file to load; ignored otherwise.
+
+    Returns
+    -------
+    VoxelGrid
+        (X, Y, Z) bool occupancy and its 4x4 affine; ``source`` is the file name. Empty grids load.
+
+    Raises
+    ------
+    GridFileError
+        Missing, unreadable, corrupt, truncated or unsupported file.
+    GridError
+        The file is fine but its array is not a usable binary 3-D grid.
+    """
+    path = Path(path)
+    ext = _require_extension(path, GRID_EXTENSIONS, "grid")
+    _require_file(path)
+    name = path.name
+    if ext == ".npy":
+        return VoxelGrid(_read_npy(path), source=name)
+    if ext == ".npz":
+        return _read_npz(path)
+    if ext == ".binvox":
+        occupancy, affine = read_binvox(_read_bytes(path), name)
+        return VoxelGrid(occupancy, affine, source=name)
+    if ext == ".vox":
+        return VoxelGrid(read_vox(_read_bytes(path), name, model_index), source=name)
+    return _read_nifti(path)
+
+
+def save_grid(grid: VoxelGrid, path) -> None:
+    """Write ``grid`` to ``path``, in the format its extension names.
+
+    ``.npy`` and ``.vox`` store the occupancy only (placement is lost); ``.npz`` and NIfTI keep
+    the full affine; ``.binvox`` needs an axis-aligned isotropic affine and ``.vox`` at most 256
+    voxels per axis, otherwise a GridFileError says so.
+    """
+    path = Path(path)
+    ext = _require_extension(path, GRID_EXTENSIONS, "grid")
+    occupancy, name = grid.occupancy, path.name
+    if ext in (".npy", ".npz"):
+        buffer = io.BytesIO()
+        if ext == ".npy":
+            np.save(buffer, occupancy)
+        else:
+            np.savez_compressed(buffer, occupancy=occupancy, affine=grid.affine)
+        data = buffer.getvalue()
+    elif ext == ".binvox":
+        data = write_binvox(occupancy, grid.affine, name)
+    elif ext == ".vox":
+        data = write_vox(occupancy, name)
+    else:
+        data = _nifti_bytes(grid, gzipped=ext == ".nii.gz")
+    _write_bytes(path, data)
+
+
+def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
+    """Load a triangle mesh; scenes are flattened into one mesh and duplicate vertices merged.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+
+    Raises
+    ------
+    GridFileError
+        Missing, unreadable or unsupported file.
+    MeshError
+        No faces, non-finite coordinates or zero extent.
+    """
+    import trimesh
+
+    path = Path(path)
+    _require_extension(path, MESH_EXTENSIONS, "mesh")
+    _require_file(path)
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh's format loaders raise anything, ValueError to struct.error
+        raise GridFileError(f"{path.name}: cannot read the mesh ({_describe(exc)})") from None
+    vertices = getattr(loaded, "vertices", np.zeros((0, 3)))
+    faces = getattr(loaded, "faces", None)
+    faces = np.zeros((0, 3), dtype=np.int64) if faces is None else faces
+    vertices, faces = check_mesh(vertices, faces, source=path.name)
+    # merge after the checks: trimesh's own processing would silently drop non-finite vertices
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.remove_unreferenced_vertices()
+    mesh.merge_vertices()
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def save_mesh(vertices, faces, path) -> None:
+    """Write a triangle mesh, keeping the vertex order (no merging or reordering).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float
+    faces : (F, 3) int
+    path : str or Path
+        ``.obj``, ``.ply``, ``.stl`` or ``.glb``.
+    """
+    import trimesh
+
+    path = Path(path)
+    ext = _require_extension(path, MESH_SAVE_EXTENSIONS, "mesh output")
+    mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
+                           np.asarray(faces, dtype=np.int64).reshape(-1, 3), process=False)
+    data = mesh.export(file_type=ext[1:])
+    _write_bytes(path, data.encode("utf-8") if isinstance(data, str) else data)
+
+
+# --- format readers ---------------------------------------------------------------------------
+
+
+def _read_npy(path: Path) -> np.ndarray:
+    try:
+        array = np.load(path, allow_pickle=False)
+    except _FILE_ERRORS as exc:
+        raise GridFileError(f"{path.name}: not a readable .npy file ({_describe(exc)})") from None
+    if not isinstance(array, np.ndarray):  # np.load opens zip archives whatever the extension
+        array.close()
+        raise GridFileError(f"{path.name}: this is an .npz archive, not an .npy array")
+    return array
+
+
+def _read_npz(path: Path) -> VoxelGrid:
+    """The occupancy array (see NPZ_ARRAY_NAMES) and its placement, if the archive stores one."""
+    name = path.name
+    try:
+        archive = np.load(path, allow_pickle=False)
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise GridFileError(f"{name}: this is an .npy array, not an .npz archive")
+        with archive:
+            arrays = {key: archive[key] for key in archive.files}  # decompresses everything here
+    except _FILE_ERRORS as exc:
+        raise GridFileError(f"{name}: not a readable .npz archive ({_describe(exc)})") from None
+    occupancy = arrays[_npz_occupancy_key(arrays, name)]
+    if "affine" in arrays:
+        return VoxelGrid(occupancy, arrays["affine"], source=name)
+    if "voxel_size" in arrays and "origin" in arrays:
+        return VoxelGrid.from_spacing(occupancy, arrays["voxel_size"], arrays["origin"],
+                                      source=name)
+    return VoxelGrid(occupancy, source=name)
+
+
+def _npz_occupancy_key(arrays: dict, name: str) -> str:
+    for key in NPZ_ARRAY_NAMES:
+        if key in arrays:
+            return key
+    grids = [key for key, array in arrays.items() if array.ndim == 3]
+    if len(grids) == 1:
+        return grids[0]
+    raise GridFileError(
+        f"{name}: cannot tell which array is the grid: no array named "
+        f"{'/'.join(NPZ_ARRAY_NAMES)} and {len(grids)} 3-D arrays among {sorted(arrays)}"
+    )
+
+
+def _read_nifti(path: Path) -> VoxelGrid:
+    import nibabel as nib
+    from nibabel.filebasedimages import ImageFileError
+
+    name = path.name
+    try:
+        image = nib.load(path, mmap=False)
+        shape = _drop_trailing_ones(image.shape)  # (X, Y, Z, 1) volumes are common
+        guard_size(shape, name)  # before reading the voxel data
+        data = np.asanyarray(image.dataobj).reshape(shape)
+        affine = image.affine
+    except (ImageFileError, *_FILE_ERRORS) as exc:
+        raise GridFileError(f"{name}: not a readable NIfTI file ({_describe(exc)})") from None
+    return VoxelGrid(_label_occupancy(data), affine, source=name)
+
+
+def _drop_trailing_ones(shape: tuple) -> tuple:
+    shape = tuple(int(n) for n in shape)
+    while len(shape) > 3 and shape[-1] == 1:
+        shape = shape[:-1]
+    return shape
+
+
+def _label_occupancy(data: np.ndarray) -> np.ndarray:
+    """``data > 0`` for masks and integer labels; other values go to ``as_occupancy`` to refuse.
+
+    Float volumes count as labels only when every value is a whole number (NIfTI writers often
+    store masks as float32); a probability map is refused by the grid check with its hint.
+    """
+    if data.dtype.kind in "biu":
+        return data > 0
+    if data.dtype.kind == "f" and np.all(np.isfinite(data)) and np.all(data == np.round(data)):
+        return data > 0
+    return data
+
+
+def _nifti_bytes(grid: VoxelGrid, gzipped: bool) -> bytes:
+    """A single-file NIfTI-1 image: uint8 0/1 voxels, the affine as both sform and qform."""
+    import nibabel as nib
+
+    image = nib.Nifti1Image(grid.occupancy.astype(np.uint8), grid.affine)
+    image.set_sform(grid.affine, code="scanner")
+    image.set_qform(grid.affine, code="scanner")  # the rigid part, for readers that prefer qform
+    data = image.to_bytes()
+    return gzip.compress(data, compresslevel=6) if gzipped else data
+
+
+# --- file plumbing ----------------------------------------------------------------------------
+
+
+def _extension(path, choices) -> str | None:
+    """The extension of ``path`` among ``choices`` (longest match, so .nii.gz beats .gz)."""
+    name = Path(path).name.lower()
+    matches = [ext for ext in choices if name.endswith(ext) and len(name) > len(ext)]
+    return max(matches, key=len) if matches else None
+
+
+def _require_extension(path: Path, choices, kind: str) -> str:
+    ext = _extension(path, choices)
+    if ext is None:
+        raise GridFileError(
+            f"{path.name}: unsupported {kind} format '{path.suffix or path.name}'; "
+            f"supported: {', '.join(choices)}"
+        )
+    return ext
+
+
+def _require_file(path: Path) -> None:
+    if not path.exists():
+        raise GridFileError(f"{path.name}: file not found ({path})")
+    if not path.is_file():
+        raise GridFileError(f"{path.name}: not a file ({path})")
+
+
+def _read_bytes(path: Path) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise GridFileError(f"{path.name}: cannot read the file ({_describe(exc)})") from None
+
+
+def _write_bytes(path: Path, data: bytes) -> None:
+    try:
+        path.write_bytes(data)
+    except OSError as exc:
+        raise GridFileError(f"{path.name}: cannot write the file ({_describe(exc)})") from None
+
+
+def _describe(exc: BaseException) -> str:
+    """One line for a library exception: its message, or its type when it has none."""
+    text = getattr(exc, "strerror", None) or str(exc).strip()
+    return (text.splitlines()[0] if text else "") or type(exc).__name__

@@ -1,0 +1,148 @@
+"""Spatial ops on dense channel-last features ``(B, X, Y, Z, C)``: the training and reference path.
+
+Plain torch (``F.conv3d``, ``F.pad``, reshapes into windows, one gather for the snakes), so it is
+the obviously-correct evaluation that ``BandOps`` is tested against. Borders replicate the
+nearest grid point (see ``common.py``). ``radius`` arguments exist for interface parity with
+``BandOps`` and are ignored here.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from .common import CELL_CORNERS, cell_surface, child_prediction, snake_corners
+
+
+class DenseOps:
+    """Ops of one lattice of spatial shape ``shape``; ``half`` is the lattice halved."""
+
+    def __init__(self, shape):
+        self.shape = tuple(int(n) for n in shape)
+        self.radius = 0
+        self._half = None
+
+    @property
+    def half(self) -> DenseOps:
+        """The 2x coarser lattice (CRPM's inner resolution, and the next cascade scale)."""
+        if self._half is None:
+            if any(n % 2 for n in self.shape):
+                raise ValueError(f"lattice {self.shape} cannot be halved")
+            self._half = DenseOps([n // 2 for n in self.shape])
+        return self._half
+
+    coarser = half
+
+    # ------------------------------------------------------------------ bookkeeping (no-ops)
+    def crop(self, x, radius):
+        return x
+
+    def resample(self, x, radius):
+        return x
+
+    def input(self, g: torch.Tensor) -> torch.Tensor:
+        """(B, X, Y, Z) occupancy -> (B, X, Y, Z, 1) float features."""
+        return g.to(torch.float32)[..., None]
+
+    # ------------------------------------------------------------------ spatial ops
+    def conv(self, x: torch.Tensor, conv: torch.nn.Conv3d, radius=None) -> torch.Tensor:
+        """k x k x k convolution, stride 1, replicate padding."""
+        pad = conv.kernel_size[0] // 2
+        # (B, C, X, Y, Z)
+        x_cf = x.permute(0, 4, 1, 2, 3)
+        if pad:
+            x_cf = F.pad(x_cf, (pad,) * 6, mode="replicate")
+        return F.conv3d(x_cf, conv.weight, conv.bias).permute(0, 2, 3, 4, 1)
+
+    def snake(self, y: torch.Tensor, offsets: torch.Tensor, axis: int, radius=None):
+        """Sum over the taps of one snake branch of the pre-projected features.
+
+        Args:
+            y: (B, X, Y, Z, K * b) features already multiplied by each tap's weights.
+            offsets: (B, X, Y, Z, 2, K) cumulative lateral offsets.
+
+        Returns:
+            (B, X, Y, Z, b).
+        """
+        bsz, nx, ny, nz, kb = y.shape
+        k = offsets.shape[-1]
+        n = nx * ny * nz
+        coords = _grid_coords(self.shape, y.device).repeat(bsz, 1)  # (B N, 3)
+        corners, weights = snake_corners(coords, offsets.reshape(bsz * n, 2, k), axis)
+        hi = torch.tensor(self.shape, device=y.device) - 1
+        corners = torch.minimum(corners.clamp_min(0), hi)
+        batch = torch.arange(bsz, device=y.device).repeat_interleave(n)[:, None, None]
+        rows = batch * n + (corners[..., 0] * ny + corners[..., 1]) * nz + corners[..., 2]
+        taps = torch.arange(k, device=y.device)[None, :, None]
+        # (B N, K, 4, b)
+        values = y.reshape(bsz * n * k, kb // k)[rows * k + taps]
+        out = (values * weights[..., None]).sum((1, 2))
+        return out.reshape(bsz, nx, ny, nz, kb // k)
+
+    def windows(self, x: torch.Tensor, window: int, shift: int, attend, radius=None):
+        """Apply ``attend`` to every window of ``window^3`` points (windows start at -shift).
+
+        Args:
+            x: (B, X, Y, Z, C); attend: (W, window^3, C) -> (W, window^3, C').
+
+        Returns:
+            (B, X, Y, Z, C').
+        """
+        bsz, nx, ny, nz, c = x.shape
+        w = window
+        pads = [(shift, (-(n + shift)) % w) for n in (nx, ny, nz)]
+        # (B, C, X', Y', Z')
+        x_cf = F.pad(x.permute(0, 4, 1, 2, 3), [p for lo_hi in reversed(pads) for p in lo_hi],
+                     mode="replicate")
+        mx, my, mz = (s // w for s in x_cf.shape[2:])
+        # (B, C, mx, w, my, w, mz, w) -> (B mx my mz, w^3, C)
+        tokens = x_cf.reshape(bsz, c, mx, w, my, w, mz, w).permute(0, 2, 4, 6, 3, 5, 7, 1)
+        out = attend(tokens.reshape(-1, w ** 3, c))
+        c_out = out.shape[-1]
+        out = out.reshape(bsz, mx, my, mz, w, w, w, c_out).permute(0, 1, 4, 2, 5, 3, 6, 7)
+        out = out.reshape(bsz, mx * w, my * w, mz * w, c_out)
+        return out[:, shift:shift + nx, shift:shift + ny, shift:shift + nz]
+
+    def down(self, x: torch.Tensor, radius=None) -> torch.Tensor:
+        """(B, X, Y, Z, C) -> (B, X/2, Y/2, Z/2, C): mean of each 2x2x2 block."""
+        bsz, nx, ny, nz, c = x.shape
+        return x.reshape(bsz, nx // 2, 2, ny // 2, 2, nz // 2, 2, c).mean((2, 4, 6))
+
+    def up(self, x_half: torch.Tensor, radius=None) -> torch.Tensor:
+        """(B, X/2, Y/2, Z/2, C) on ``half`` -> (B, X, Y, Z, C), nearest neighbour."""
+        bsz, hx, hy, hz, c = x_half.shape
+        x = x_half[:, :, None, :, None, :, None, :].expand(bsz, hx, 2, hy, 2, hz, 2, c)
+        return x.reshape(bsz, 2 * hx, 2 * hy, 2 * hz, c)
+
+    def upsample_prediction(self, p: torch.Tensor, radius=None) -> torch.Tensor:
+        """Sparse up-sampling u(P_{s+1}) -> U_s (paper eq. 6).
+
+        Args:
+            p: (B, X/2, Y/2, Z/2, 6) coarser prediction (channel-last).
+
+        Returns:
+            (B, X, Y, Z, 6): vertex offsets in the child cells' frames, edge probabilities,
+            zeros under non-surface coarse cells.
+        """
+        bsz, hx, hy, hz, _ = p.shape
+        q = torch.sigmoid(p[..., 3:])
+        # (B, 3, hx+1, hy+1, hz+1): the far corners of border cells replicate the border
+        q_pad = F.pad(q.permute(0, 4, 1, 2, 3), (0, 1, 0, 1, 0, 1), mode="replicate")
+        corners = torch.stack([q_pad[:, :, dx:dx + hx, dy:dy + hy, dz:dz + hz]
+                               for dx, dy, dz in CELL_CORNERS.tolist()], dim=-1)
+        # (B, hx, hy, hz, 8, 3)
+        mask = cell_surface(corners.permute(0, 2, 3, 4, 5, 1))
+        mask[:, -1] = False  # cells need their far corner inside the lattice
+        mask[:, :, -1] = False
+        mask[:, :, :, -1] = False
+        # child (dx, dy, dz) of each coarse cell, broadcast over (B, hx, 2, hy, 2, hz, 2, 3)
+        child = CELL_CORNERS.to(p.device).reshape(1, 1, 2, 1, 2, 1, 2, 3)
+        out = child_prediction(p[:, :, None, :, None, :, None, :],
+                               mask[:, :, None, :, None, :, None], child)
+        return out.reshape(bsz, 2 * hx, 2 * hy, 2 * hz, 6)
+
+
+def _grid_coords(shape, device) -> torch.Tensor:
+    """(X Y Z, 3) int64 coordinates of every lattice point, C order."""
+    axes = [torch.arange(n, device=device) for n in shape]
+    return torch.stack(torch.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)

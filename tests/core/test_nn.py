@@ -1,0 +1,145 @@
+"""AGNDC networks: config validation, shapes, training step, band evaluation == dense."""
+
+import numpy as np
+import pytest
+import torch
+
+from agndc_core.errors import ModelError
+from agndc_core.inference import BAND_TOLERANCE
+from agndc_core.labels import crossed_edges, surface_cells
+from agndc_core.nn import AGNDCCascade, AGNDCConfig, AGNDCLoss, undc_baseline
+
+
+def blob_lattice(shape=(32, 32, 24)) -> np.ndarray:
+    """A sphere fused with a box (a concave crease), padded away from the border."""
+    x, y, z = np.meshgrid(*[np.arange(n) for n in shape], indexing="ij")
+    sphere = (x - 14) ** 2 + (y - 15) ** 2 + (z - 11) ** 2 < 30
+    box = (abs(x - 20) < 4) & (abs(y - 10) < 3) & (abs(z - 14) < 4)
+    return sphere | box
+
+
+def model(seed=0, **kw) -> AGNDCCascade:
+    torch.manual_seed(seed)
+    return AGNDCCascade(AGNDCConfig(width=8, **kw)).eval()
+
+
+# ---------------------------------------------------------------------- config
+
+
+def test_config_round_trip_and_presets():
+    cfg = AGNDCConfig(width=32, levels=1, use_crpm=False)
+    assert AGNDCConfig.from_dict(cfg.to_dict()) == cfg
+    base = undc_baseline()
+    assert (base.levels, base.use_attention, base.use_snake, base.use_dffm, base.use_crpm) == (
+        0, False, False, False, False)
+
+
+@pytest.mark.parametrize("bad, word", [
+    ({"width": 30}, "width"), ({"width": "64"}, "width"), ({"levels": -1}, "levels"),
+    ({"window": 3}, "window"), ({"heads": 3}, "heads"), ({"snake_kernel": 8}, "snake_kernel"),
+    ({"use_snake": 1}, "use_snake"), ({"band_radius": 0}, "band_radius"),
+    ({"colour": "red"}, "colour"),
+])
+def test_config_rejects_bad_values(bad, word):
+    with pytest.raises(ModelError, match=word):
+        AGNDCConfig.from_dict({**AGNDCConfig().to_dict(), **bad})
+
+
+def test_config_from_dict_needs_a_mapping():
+    with pytest.raises(ModelError, match="mapping"):
+        AGNDCConfig.from_dict([("width", 8)])
+
+
+# ---------------------------------------------------------------------- dense forward
+
+
+@pytest.mark.parametrize("kw", [{}, {"levels": 0}, {"use_crpm": False},
+                                {"use_dffm": False, "use_crpm": False}, {"levels": 1},
+                                {"levels": 0, "use_attention": False, "use_snake": False,
+                                 "use_dffm": False, "use_crpm": False}])
+def test_output_shapes_every_scale_non_cubic(kw):
+    net = model(**kw)
+    g = torch.from_numpy(blob_lattice((16, 24, 8)))[None].repeat(2, 1, 1, 1)
+    with torch.no_grad():
+        preds = net(g)
+    assert len(preds) == net.levels + 1
+    for s, p in enumerate(preds):
+        assert p.shape == (2, 6, 16 >> s, 24 >> s, 8 >> s)
+        assert torch.isfinite(p).all()
+
+
+def test_forward_scale_checks_inputs():
+    net = model()
+    g = torch.zeros(1, 8, 8, 8)
+    with pytest.raises(ModelError, match="needs the prediction"):
+        net.forward_scale(0, g)
+    with pytest.raises(ModelError, match="coarser prediction"):
+        net.forward_scale(0, g, torch.zeros(1, 6, 8, 8, 8))
+    with pytest.raises(ModelError, match="multiple of 4"):
+        net(torch.zeros(1, 10, 8, 8))
+
+
+def test_training_step_reaches_every_parameter_and_lambda():
+    net = model().train()
+    loss_fn = AGNDCLoss()
+    lattice = blob_lattice((16, 16, 16))
+    g = torch.from_numpy(lattice)[None]
+    edge = torch.from_numpy(crossed_edges(lattice))[None]
+    surface = torch.from_numpy(surface_cells(crossed_edges(lattice)))[None]
+    vertex = torch.rand(1, 16, 16, 16, 3)
+    p0 = net(g)[0]
+    loss, parts = loss_fn(p0, vertex, edge, surface)
+    assert torch.isfinite(loss) and parts["lambda"] == pytest.approx(1.0)
+    loss.backward()
+    assert loss_fn.t.grad is not None and loss_fn.t.grad != 0
+    used = [p for n, p in net.nets[0].named_parameters()]
+    assert all(p.grad is not None for p in used)
+    assert sum(float(p.grad.abs().sum()) for p in used) > 0
+
+
+def test_loss_rejects_mismatched_targets():
+    with pytest.raises(ModelError, match="loss"):
+        AGNDCLoss()(torch.zeros(1, 6, 4, 4, 4), torch.zeros(1, 4, 4, 4, 2),
+                    torch.zeros(1, 4, 4, 4, 3), torch.zeros(1, 4, 4, 4))
+
+
+# ---------------------------------------------------------------------- band evaluation
+
+
+def test_band_equals_dense_when_the_band_covers_the_lattice():
+    """Every machinery piece (torus rows, windows, snakes, half lattices, sparse up-sampling)
+    against the independent dense implementation: exact up to float rounding."""
+    net = model()
+    lattice = blob_lattice((24, 20, 16))
+    with torch.inference_mode():
+        dense = [p[0].permute(1, 2, 3, 0) for p in net(torch.from_numpy(lattice)[None])]
+        band = net.forward_band(lattice, radius=40)
+    for d, b in zip(dense, band):
+        torch.testing.assert_close(b, d, atol=BAND_TOLERANCE, rtol=1e-5)
+
+
+@pytest.mark.parametrize("kw, radius", [
+    ({"levels": 2, "use_snake": False, "use_attention": False, "use_crpm": False}, 6),
+    ({"levels": 1, "use_snake": False, "use_crpm": False}, 8),
+])
+def test_band_far_field_is_exact_within_the_receptive_field(kw, radius):
+    """Networks whose receptive field the band covers: far points (most of the lattice) come
+    from the torus rows, and the surface cells still match dense exactly."""
+    net = model(**kw)
+    lattice = blob_lattice()
+    surface = surface_cells(crossed_edges(lattice))
+    with torch.inference_mode():
+        dense = net(torch.from_numpy(lattice)[None])[0][0].permute(1, 2, 3, 0)
+        band = net.forward_band(lattice, radius=radius)[0]
+    np.testing.assert_allclose(band[surface].numpy(), dense[surface].numpy(),
+                               atol=BAND_TOLERANCE)
+
+
+def test_band_evaluation_is_differentiable():
+    net = model().train()
+    lattice = blob_lattice((16, 16, 16))
+    p0 = net.forward_band(lattice, radius=3)[0]
+    p0.square().mean().backward()
+    grads = [p.grad for p in net.nets[0].parameters()]
+    assert all(g is not None for g in grads)
+    assert sum(float(g.abs().sum()) for g in grads) > 0
