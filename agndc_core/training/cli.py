@@ -1,0 +1,71 @@
+"""``agndc train-data`` and ``agndc train``: the training entry points of the CLI."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+
+def add_train_parser(sub) -> None:
+    p = sub.add_parser("train-data", help="generate procedural CAD training samples (npz)")
+    p.add_argument("-o", "--out", type=Path, required=True)
+    p.add_argument("-n", "--count", type=int, default=480)
+    p.add_argument("--seed0", type=int, default=0, help="first shape seed (val: use another range)")
+    p.add_argument("--workers", type=int, default=2)
+    p.set_defaults(func=_cmd_data)
+
+    p = sub.add_parser("train", help="train the AGNDC cascade (or the UNDC baseline) per scale")
+    p.add_argument("--data", type=Path, required=True, help="folder from `agndc train-data`")
+    p.add_argument("--val", type=Path, help="held-out samples for CD/F1 at the end")
+    p.add_argument("-o", "--out", type=Path, required=True, help="run directory")
+    p.add_argument("--model", default="{}", help='AGNDCConfig fields as JSON, e.g. {"width": 16}')
+    p.add_argument("--undc", action="store_true", help="the UNDC baseline (one scale, plain convs)")
+    p.add_argument("--steps", default="1000,500,500", help="steps per scale s = 0,1,..")
+    p.add_argument("--crop", default="24,16,32", help="crop edge per scale s = 0,1,..")
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--lr", type=float, default=2e-3)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--resume", action="store_true", help="continue from the run's state")
+    p.add_argument("--ship", metavar="NAME", help="copy the final checkpoint into the package "
+                   "as agndc_core/weights/NAME.{safetensors,json}")
+    p.set_defaults(func=_cmd_train)
+
+
+def _ints(text: str) -> list[int]:
+    return [int(x) for x in text.split(",") if x.strip()]
+
+
+def _cmd_data(args) -> int:
+    from .data import build_dataset
+
+    paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers)
+    print(f"{len(paths)} samples in {args.out}")
+    return 0
+
+
+def _cmd_train(args) -> int:
+    from ..checkpoint import WEIGHTS_DIR
+    from ..errors import AGNDCError
+    from ..nn import undc_baseline
+    from .train import TrainConfig, train
+
+    try:
+        model = json.loads(args.model)
+    except json.JSONDecodeError as exc:
+        raise AGNDCError(f"--model is not valid JSON: {exc}") from None
+    if args.undc:
+        model = {**undc_baseline(model.get("width", 64)).to_dict(), **model}
+    cfg = TrainConfig(data=str(args.data), out=str(args.out), val=str(args.val) if args.val
+                      else None, model=model, steps=_ints(args.steps), crop=_ints(args.crop),
+                      batch=args.batch, lr=args.lr, seed=args.seed, threads=args.threads)
+    path = train(cfg, resume=args.resume)
+    print(f"checkpoint: {path}")
+    if args.ship:
+        WEIGHTS_DIR.mkdir(parents=True, exist_ok=True)
+        for suffix in (".safetensors", ".json"):
+            shutil.copyfile(path.with_suffix(suffix), WEIGHTS_DIR / f"{args.ship}{suffix}")
+        print(f"shipped as {WEIGHTS_DIR / args.ship}.safetensors")
+    return 0
