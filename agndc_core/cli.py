@@ -62,6 +62,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--res", type=int, default=64)
     p.set_defaults(func=_cmd_demo)
 
+    from .report import add_parser as add_report_parser
+
+    add_report_parser(sub)
     try:
         from .training.cli import add_train_parser
     except ImportError:  # training code is not shipped inside the Blender extension

@@ -1,11 +1,13 @@
-"""Benchmark of AGNDC inference (band path, random weights) against marching cubes.
+"""Benchmark of AGNDC inference (band path) plus dual contouring against marching cubes.
 
-For each width and grid size, in a fresh subprocess (so peak RSS is per run): AGNDC time per
+Models: ``--models`` takes widths (a random-weight cascade with the default ``AGNDCConfig`` at that
+width, e.g. 32 64) and/or ``shipped`` / ``undc`` (the packaged checkpoints with their own configs
+and trained weights). For each model and grid size, in a fresh subprocess (so peak RSS is per run): AGNDC time per
 scale and per stage (GDFEM / FDM / DFFM / CRPM, summed over scales), marching cubes of the same
 lattice (scikit-image, level 0.5), the ratio, band rows at scale 0 and the peak RSS; then the
-parameter count and safetensors file size of each width.
+parameter count and safetensors file size of each model.
 
-Usage: python benchmarks/bench_inference.py [--widths 32 64] [--sizes 32 64 128] [--seed 0]
+Usage: python benchmarks/bench_inference.py [--models shipped 32 64] [--sizes 32 64 128] [--seed 0]
        [--device cpu|cuda] [--threads N] [--repeat 1]
 """
 
@@ -21,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from agndc_core.checkpoint import save_checkpoint
+from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint, save_checkpoint
+from agndc_core.contour import dual_contour
+from agndc_core.labels import crossed_edges
 from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import predict_lattice
 from agndc_core.mc import marching_cubes_lattice
@@ -39,10 +43,21 @@ def cad_lattice(size: int, seed: int) -> np.ndarray:
     return pad_to_lattice(voxelize(vertices, faces, size).occupancy)
 
 
-def timed_model(width: int, device: str):
-    """A random-weight cascade whose scale and stage times accumulate in a dict."""
+SHIPPED = {"shipped": "agndc", "undc": "undc"}
+
+
+def build_model(spec: str):
+    """The shipped checkpoint named by ``spec``, or a random-weight default cascade of that width."""
+    if spec in SHIPPED:
+        model, _ = load_checkpoint(default_checkpoint_path(SHIPPED[spec]))
+        return model
     torch.manual_seed(0)
-    model = AGNDCCascade(AGNDCConfig(width=width)).to(device).eval()
+    return AGNDCCascade(AGNDCConfig(width=int(spec)))
+
+
+def timed_model(spec: str, device: str):
+    """A cascade whose scale and stage times accumulate in a dict."""
+    model = build_model(spec).to(device).eval()
     times = {}
 
     def hook(key):
@@ -66,28 +81,31 @@ def timed_model(width: int, device: str):
     return model, times
 
 
-def run_one(width: int, size: int, seed: int, device: str, repeat: int) -> dict:
+def run_one(spec: str, size: int, seed: int, device: str, repeat: int) -> dict:
     lattice = cad_lattice(size, seed)
-    model, times = timed_model(width, device)
+    model, times = timed_model(spec, device)
     best = None
     for _ in range(repeat):
         times.clear()
         start = time.perf_counter()
-        predict_lattice(model, lattice)
+        vertex, _ = predict_lattice(model, lattice)
+        network = time.perf_counter() - start
+        dual_contour(vertex, crossed_edges(lattice), lattice)
         total = time.perf_counter() - start
+        times["contour"] = total - network
         if best is None or total < best[0]:
             best = (total, dict(times))
     start = time.perf_counter()
     marching_cubes_lattice(lattice)
     mc = time.perf_counter() - start
     band_rows = int((surface_distance(lattice) <= model.config.band_radius).sum())
-    return {"width": width, "size": size, "shape": list(lattice.shape), "total": best[0],
+    return {"model": spec, "size": size, "shape": list(lattice.shape), "total": best[0],
             "times": best[1], "mc": mc, "band_rows": band_rows, "points": int(lattice.size),
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def model_size(width: int) -> tuple[int, int]:
-    model = AGNDCCascade(AGNDCConfig(width=width))
+def model_size(spec: str) -> tuple[int, int]:
+    model = build_model(spec)
     with tempfile.TemporaryDirectory() as tmp:
         path = save_checkpoint(model, Path(tmp) / "m", training={}, metrics={})
         return sum(p.numel() for p in model.parameters()), path.stat().st_size
@@ -95,49 +113,51 @@ def model_size(width: int) -> tuple[int, int]:
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--widths", type=int, nargs="+", default=[32, 64])
+    parser.add_argument("--models", nargs="+", default=["shipped", "32", "64"],
+                        help="widths of random default cascades and/or 'shipped', 'undc'")
     parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=0, help="torch threads (0: default)")
     parser.add_argument("--repeat", type=int, default=1)
-    parser.add_argument("--single", nargs=2, type=int, help=argparse.SUPPRESS)
+    parser.add_argument("--single", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.device == "cuda" and not torch.cuda.is_available():
         sys.exit("--device cuda: no CUDA device available")
     if args.threads:
         torch.set_num_threads(args.threads)
     if args.single:
-        print(json.dumps(run_one(*args.single, args.seed, args.device, args.repeat)))
+        print(json.dumps(run_one(args.single[0], int(args.single[1]), args.seed, args.device, args.repeat)))
         return
 
-    print(f"AGNDC band inference, random weights, CAD part seed {args.seed}, device "
+    print(f"AGNDC band inference + dual contouring, CAD part seed {args.seed}, device "
           f"{args.device}, torch threads {args.threads or torch.get_num_threads()}")
-    head = (f"{'width':>5} {'grid':>5} {'lattice':>13} {'band':>8} {'AGNDC s':>8} "
+    head = (f"{'model':>7} {'grid':>5} {'lattice':>13} {'band':>8} {'AGNDC s':>8} "
             f"{'scales 2/1/0 s':>17} {'GDFEM':>6} {'FDM':>6} {'DFFM':>6} {'CRPM':>6} "
-            f"{'MC s':>6} {'ratio':>6} {'peak MB':>8}")
+            f"{'DC s':>6} {'MC s':>6} {'ratio':>6} {'peak MB':>8}")
     print(head)
-    for width in args.widths:
+    for spec in args.models:
         for size in args.sizes:
-            cmd = [sys.executable, __file__, "--single", str(width), str(size), "--seed",
+            cmd = [sys.executable, __file__, "--single", spec, str(size), "--seed",
                    str(args.seed), "--device", args.device, "--threads", str(args.threads),
                    "--repeat", str(args.repeat)]
             done = subprocess.run(cmd, capture_output=True, text=True)
             if done.returncode:
-                print(f"{width:>5} {size:>5} failed: {done.stderr.strip()[-300:]}")
+                print(f"{spec:>7} {size:>5} failed: {done.stderr.strip()[-300:]}")
                 continue
             r = json.loads(done.stdout.strip().splitlines()[-1])
             t = r["times"]
             scales = "/".join(f"{t.get(f'scale{s}', 0):.2f}" for s in (2, 1, 0))
             stages = " ".join(f"{t.get(k, 0.0):6.2f}" for k in STAGES)
-            print(f"{width:>5} {size:>5} {'x'.join(map(str, r['shape'])):>13} "
+            print(f"{spec:>7} {size:>5} {'x'.join(map(str, r['shape'])):>13} "
                   f"{r['band_rows']:>8} {r['total']:8.2f} {scales:>17} {stages} "
+                  f"{t['contour']:6.3f} "
                   f"{r['mc']:6.3f} {r['total'] / r['mc']:6.0f} {r['peak_rss_mb']:8.0f}",
                   flush=True)
     print()
-    for width in args.widths:
-        params, size = model_size(width)
-        print(f"width {width}: {params:,} parameters, safetensors {size / 2 ** 20:.1f} MiB")
+    for spec in args.models:
+        params, size = model_size(spec)
+        print(f"{spec}: {params:,} parameters, safetensors {size / 2 ** 20:.1f} MiB")
 
 
 if __name__ == "__main__":

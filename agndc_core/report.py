@@ -1,0 +1,263 @@
+"""The evaluation report (docs/results.md): every method on a folder of meshes, in the layout of the
+paper's Table 1, per category, with inference times, the models used and a picture.
+
+    agndc report ../shared/data/dev -o docs/results.md --res 64
+
+The markdown, a CSV of every (mesh, method, resolution) row and the PNG are written next to each
+other; the report names the command that produced it so it can be rebuilt.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import platform
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from .evaluate import (METRIC_COLUMNS, evaluate_meshes, find_meshes, markdown_table,
+                       summarize_rows, write_report)
+from .pipeline import CHECKPOINT_NAMES, METHODS
+
+REPORT_METHODS = ("mc", "undc", "agndc", "oracle")
+CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
+#: one shape per category for the picture (names are file stems of the dev set)
+FIGURE_SHAPES = ("fandisk", "bunny_oded", "1004825")
+FIGURE_COLUMNS = ("input voxels", "marching cubes", "AGNDC", "ground truth")
+
+
+def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
+                 n_samples=100_000, figure_shapes=FIGURE_SHAPES, command=None) -> Path:
+    """Evaluate, then write ``out_md`` (+ ``<stem>_rows.csv`` and ``<stem>_shapes.png``)."""
+    out_md = Path(out_md)
+    out_md.parent.mkdir(parents=True, exist_ok=True)
+    meshes = find_meshes(folder)
+    rows = []
+    for resolution in resolutions:
+        rows += evaluate_meshes(meshes, methods, resolution=resolution, n_samples=n_samples)
+    rows_dir = out_md.parent / f"{out_md.stem}_rows"
+    write_report(rows, rows_dir)
+    figure = out_md.parent / f"{out_md.stem}_shapes.png"
+    pictured = render_figure(meshes, figure_shapes, figure, resolution=resolutions[0])
+    text = _markdown(rows, resolutions, methods, figure if pictured else None, rows_dir, command,
+                     n_samples)
+    out_md.write_text(text)
+    return out_md
+
+
+def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples) -> str:
+    lines = ["# AGNDC results on the dev meshes", ""]
+    lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
+              f"{platform.machine()} with {os.cpu_count()} CPU cores, torch "
+              f"{_torch_version()} (CPU), Python {platform.python_version()}. Every mesh is "
+              "voxelised at the stated resolution (voxels on the longest side); every method "
+              "reconstructs that same binary grid, and the metrics (UNDC definitions, "
+              f"{n_samples:,} samples per surface, the ground truth's normalised frame) compare the result "
+              "with the original mesh. Means over shapes; ECD/EF1 skip shapes without sharp "
+              "edges. `oracle` contours ground-truth labels: the ceiling of this contouring. "
+              "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring; "
+              f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
+    lines += ["## Models", "", _models_table(methods), ""]
+    for resolution in resolutions:
+        mine = [r for r in rows if r["resolution"] == resolution]
+        lines += [f"## {resolution}³: all shapes", "", markdown_table(summarize_rows(mine)), ""]
+        for category in _categories(mine):
+            part = [r for r in mine if r["category"] == category]
+            lines += [f"### {resolution}³: {category}", "",
+                      markdown_table(summarize_rows(part)), ""]
+        lines += [f"### {resolution}³: inference time per shape", "", _time_table(mine), ""]
+        lines += [f"### {resolution}³: CD×10⁵ per shape", "", _per_shape_table(mine, "cd"), ""]
+    errors = [r for r in rows if r["error"]]
+    if errors:
+        lines += ["## Failures", ""] + [f"- {r['name']} {r['method']} {r['resolution']}³: "
+                                        f"{r['error']}" for r in errors] + [""]
+    if figure is not None:
+        lines += ["## Picture", "", f"![{', '.join(FIGURE_COLUMNS)}]({figure.name})", "",
+                  f"Columns: {', '.join(FIGURE_COLUMNS)} at {resolutions[0]}³.", ""]
+    lines += [f"Every row: `{rows_dir.name}/rows.csv` (raw metrics, faces, seconds, errors).", ""]
+    return "\n".join(lines)
+
+
+def _categories(rows) -> list[str]:
+    present = {r["category"] for r in rows}
+    return [c for c in CATEGORY_ORDER if c in present] + sorted(present - set(CATEGORY_ORDER))
+
+
+def _time_table(rows) -> str:
+    """Median and max wall time of ``remesh_mesh`` (voxelise + reconstruct + contour) per method."""
+    lines = ["| method | median s | max s | median faces |", "|---|---|---|---|"]
+    for method in dict.fromkeys(r["method"] for r in rows):
+        ok = [r for r in rows if r["method"] == method and not r["error"]]
+        if not ok:
+            continue
+        seconds = np.array([r["seconds"] for r in ok])
+        faces = np.array([r["faces"] for r in ok])
+        lines.append(f"| {method} | {np.median(seconds):.2f} | {seconds.max():.2f} | "
+                     f"{int(np.median(faces)):,} |")
+    return "\n".join(lines)
+
+
+def _per_shape_table(rows, column) -> str:
+    from .metrics import REPORT_SCALE
+
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    lines = ["| shape | category | " + " | ".join(methods) + " |",
+             "|---|---|" + "---|" * len(methods)]
+    for name in dict.fromkeys(r["name"] for r in rows):
+        mine = {r["method"]: r for r in rows if r["name"] == name}
+        first = next(iter(mine.values()))
+        cells = []
+        for method in methods:
+            value = mine[method][column] if method in mine else math.nan
+            cells.append("–" if math.isnan(value) else f"{value * REPORT_SCALE.get(column, 1):.3f}")
+        lines.append(f"| {name} | {first['category']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _models_table(methods) -> str:
+    from .checkpoint import default_checkpoint_path
+
+    lines = ["| method | checkpoint | config | parameters | weights | training |",
+             "|---|---|---|---|---|---|"]
+    for method in methods:
+        if method not in CHECKPOINT_NAMES:
+            continue
+        path = default_checkpoint_path(CHECKPOINT_NAMES[method])
+        if not path.is_file():
+            lines.append(f"| {method} | missing | | | | |")
+            continue
+        meta = json.loads(path.with_suffix(".json").read_text())
+        config = meta["model_config"]
+        switches = [k for k in ("use_attention", "use_snake", "use_dffm", "use_crpm")
+                    if not config.get(k, True)]
+        described = (f"ω={config['width']}, scales={config['levels'] + 1}"
+                     + (f", snake kernel {config['snake_kernel']}" if config.get("use_snake")
+                        else "") + (f", off: {', '.join(switches)}" if switches else ""))
+        training = meta.get("training", {})
+        steps = "/".join(str(s) for s in training.get("steps_per_scale", []))
+        scales = "/".join(str(s) for s in range(len(training.get("steps_per_scale", []))))
+        data = training.get("data", {})
+        lines.append(f"| {method} | `{path.name}` | {described} | {meta['parameters']:,} | "
+                     f"{path.stat().st_size / 2 ** 20:.2f} MiB | {steps} steps at scales {scales}, "
+                     f"{data.get('samples', '?')} shapes, {training.get('train_seconds', 0) / 60:.0f}"
+                     " min CPU |")
+    return "\n".join(lines)
+
+
+def _torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def _torch_version() -> str:
+    import torch
+
+    return torch.__version__
+
+
+# -- picture ----------------------------------------------------------------------------------
+
+def render_figure(meshes, names, path, *, resolution=64) -> bool:
+    """A grid of renders: one row per named shape, columns ``FIGURE_COLUMNS``. False if none."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .gridio import load_mesh
+    from .pipeline import remesh_mesh
+
+    chosen = [(p, k) for name in names for p, k in meshes if Path(p).stem == name]
+    if not chosen:
+        return False
+    fig = plt.figure(figsize=(3.6 * len(FIGURE_COLUMNS), 3.6 * len(chosen)), dpi=110)
+    for row, (mesh_path, category) in enumerate(chosen):
+        vertices, faces = load_mesh(mesh_path)
+        mc = remesh_mesh(vertices, faces, resolution=resolution, method="mc")
+        agndc = remesh_mesh(vertices, faces, resolution=resolution, method="agndc")
+        panels = [voxel_faces(mc.grid), (mc.vertices, mc.faces), (agndc.vertices, agndc.faces),
+                  (vertices, faces)]
+        for col, (pv, pf) in enumerate(panels):
+            ax = fig.add_subplot(len(chosen), len(FIGURE_COLUMNS),
+                                 row * len(FIGURE_COLUMNS) + col + 1, projection="3d")
+            _draw(ax, np.asarray(pv, float), np.asarray(pf), vertices)
+            title = FIGURE_COLUMNS[col] if row == 0 else ""
+            ax.set_title(f"{title}\n{Path(mesh_path).stem} ({category})" if col == 0 else title)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.95, wspace=0, hspace=0.05)
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
+def voxel_faces(grid):
+    """Boundary quads of the occupied voxels (as triangles) in world coordinates."""
+    occ = np.pad(grid.occupancy, 1)
+    corners = []
+    for axis in range(3):
+        change = np.diff(occ.astype(np.int8), axis=axis)  # +1: empty->full along +axis
+        idx = np.argwhere(change != 0)
+        base = idx.astype(float) - 1.0  # back to unpadded voxel indices (lower voxel)
+        base[:, axis] += 0.5  # the face between the two voxels
+        u, v = [a for a in range(3) if a != axis]
+        quad = np.zeros((len(idx), 4, 3))
+        for n, (du, dv) in enumerate(((-.5, -.5), (.5, -.5), (.5, .5), (-.5, .5))):
+            quad[:, n] = base
+            quad[:, n, u] += du
+            quad[:, n, v] += dv
+        corners.append(quad)
+    quads = np.concatenate(corners)
+    verts = grid.index_to_world(quads.reshape(-1, 3))
+    q = np.arange(len(quads))[:, None] * 4
+    tris = np.concatenate([q + [0, 1, 2], q + [0, 2, 3]])
+    return verts, tris
+
+
+def _draw(ax, vertices, faces, reference):
+    """Flat-shaded triangles, head-light style, framed on the reference mesh's bounds."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    tri = vertices[faces]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
+    light = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
+    shade = 0.25 + 0.75 * np.abs(normal @ light)  # two-sided: orientation does not matter here
+    colors = np.clip(shade[:, None] * np.array([0.75, 0.8, 0.9]), 0, 1)
+    ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none"))
+    lo, hi = reference.min(0), reference.max(0)
+    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42  # < 1/2: the bounding box corners stay empty
+    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
+        setter(c - half, c + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=25, azim=-60)
+    ax.set_axis_off()
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("report", help="evaluate all methods on a mesh folder; write results.md")
+    p.add_argument("folder", type=Path)
+    p.add_argument("-o", "--out", type=Path, default=Path("docs/results.md"))
+    p.add_argument("--res", type=int, nargs="+", default=[64])
+    p.add_argument("--methods", default=",".join(REPORT_METHODS))
+    p.add_argument("--samples", type=int, default=100_000)
+    p.set_defaults(func=_cmd_report)
+
+
+def _cmd_report(args) -> int:
+    from .errors import AGNDCError
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    if unknown := [m for m in methods if m not in METHODS]:
+        raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
+    if not find_meshes(args.folder):
+        raise AGNDCError(f"{args.folder}: no meshes found")
+    command = "agndc " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    out = build_report(args.folder, args.out, resolutions=args.res, methods=methods,
+                       n_samples=args.samples, command=command)
+    print(f"written: {out}")
+    return 0
