@@ -32,25 +32,38 @@ FIGURE_COLUMNS = ("input voxels", "marching cubes", "AGNDC", "ground truth")
 
 
 def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
-                 n_samples=100_000, figure_shapes=FIGURE_SHAPES, command=None) -> Path:
-    """Evaluate, then write ``out_md`` (+ ``<stem>_rows.csv`` and ``<stem>_shapes.png``)."""
+                 n_samples=100_000, figure_shapes=FIGURE_SHAPES, ablations=None,
+                 command=None) -> Path:
+    """Evaluate, then write ``out_md`` (+ ``<stem>_rows/`` and ``<stem>_shapes.png``).
+
+    ``ablations`` maps a label to an AGNDC checkpoint path: each is evaluated like ``agndc`` at
+    the first resolution and tabulated in the layout of the paper's Table 4.
+    """
     out_md = Path(out_md)
     out_md.parent.mkdir(parents=True, exist_ok=True)
     meshes = find_meshes(folder)
     rows = []
     for resolution in resolutions:
         rows += evaluate_meshes(meshes, methods, resolution=resolution, n_samples=n_samples)
+    ablation_rows = {}
+    for label, checkpoint in (ablations or {}).items():
+        found = evaluate_meshes(meshes, ["agndc"], resolution=resolutions[0], n_samples=n_samples,
+                                checkpoints={"agndc": checkpoint})
+        for row in found:
+            row["method"] = label
+        ablation_rows[label] = (Path(checkpoint), found)
     rows_dir = out_md.parent / f"{out_md.stem}_rows"
-    write_report(rows, rows_dir)
+    write_report(rows + [r for _, found in ablation_rows.values() for r in found], rows_dir)
     figure = out_md.parent / f"{out_md.stem}_shapes.png"
     pictured = render_figure(meshes, figure_shapes, figure, resolution=resolutions[0])
     text = _markdown(rows, resolutions, methods, figure if pictured else None, rows_dir, command,
-                     n_samples)
+                     n_samples, ablation_rows)
     out_md.write_text(text)
     return out_md
 
 
-def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples) -> str:
+def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
+              ablation_rows) -> str:
     lines = ["# AGNDC results on the dev meshes", ""]
     lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
               f"{platform.machine()} with {os.cpu_count()} CPU cores, torch "
@@ -66,12 +79,16 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples) 
     for resolution in resolutions:
         mine = [r for r in rows if r["resolution"] == resolution]
         lines += [f"## {resolution}³: all shapes", "", markdown_table(summarize_rows(mine)), ""]
+        lines += _comparison(summarize_rows(mine))
         for category in _categories(mine):
             part = [r for r in mine if r["category"] == category]
             lines += [f"### {resolution}³: {category}", "",
                       markdown_table(summarize_rows(part)), ""]
         lines += [f"### {resolution}³: inference time per shape", "", _time_table(mine), ""]
         lines += [f"### {resolution}³: CD×10⁵ per shape", "", _per_shape_table(mine, "cd"), ""]
+    if ablation_rows:
+        lines += [f"## Ablation ({resolutions[0]}³, all shapes; layout of the paper's Table 4)", "",
+                  _ablation_table(rows, resolutions[0], ablation_rows), ""]
     errors = [r for r in rows if r["error"]]
     if errors:
         lines += ["## Failures", ""] + [f"- {r['name']} {r['method']} {r['resolution']}³: "
@@ -81,6 +98,28 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples) 
                   f"Columns: {', '.join(FIGURE_COLUMNS)} at {resolutions[0]}³.", ""]
     lines += [f"Every row: `{rows_dir.name}/rows.csv` (raw metrics, faces, seconds, errors).", ""]
     return "\n".join(lines)
+
+
+def _comparison(summaries) -> list[str]:
+    """Sentences: AGNDC against each baseline, metric by metric (computed, not written by hand)."""
+    by_method = {s["method"]: s for s in summaries}
+    if "agndc" not in by_method:
+        return []
+    lower_is_better = {"cd", "ecd"}
+    out = []
+    for base in ("mc", "undc"):
+        if base not in by_method:
+            continue
+        parts = []
+        for column in METRIC_COLUMNS:
+            a, b = by_method["agndc"][column], by_method[base][column]
+            if not (math.isfinite(a) and math.isfinite(b)) or b == 0:
+                continue
+            better = a < b if column in lower_is_better else a > b
+            parts.append(f"{column.upper()} {100 * (a - b) / abs(b):+.1f} % "
+                         f"({'better' if better else 'worse'})")
+        out.append(f"AGNDC against {base}: " + ", ".join(parts) + ".")
+    return out + [""] if out else []
 
 
 def _categories(rows) -> list[str]:
@@ -116,6 +155,37 @@ def _per_shape_table(rows, column) -> str:
             value = mine[method][column] if method in mine else math.nan
             cells.append("–" if math.isnan(value) else f"{value * REPORT_SCALE.get(column, 1):.3f}")
         lines.append(f"| {name} | {first['category']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+ABLATION_SWITCHES = (("multi-scale", lambda c: c["levels"] > 0),
+                     ("LWSA", lambda c: c["use_attention"]), ("DSConv", lambda c: c["use_snake"]),
+                     ("DFFM", lambda c: c["levels"] > 0 and c["use_dffm"]),
+                     ("CRPM", lambda c: c["levels"] > 0 and c["use_crpm"]))
+
+
+def _ablation_table(rows, resolution, ablation_rows) -> str:
+    """One line per configuration (modules ticked), baseline first and full AGNDC last."""
+    from .checkpoint import default_checkpoint_path
+    from .metrics import REPORT_SCALE
+
+    entries = []
+    for method in ("undc", *ablation_rows, "agndc"):
+        if method in ablation_rows:
+            path, found = ablation_rows[method]
+        else:
+            path = default_checkpoint_path(CHECKPOINT_NAMES[method])
+            found = [r for r in rows if r["method"] == method and r["resolution"] == resolution]
+        if found and path.is_file():
+            config = json.loads(path.with_suffix(".json").read_text())["model_config"]
+            entries.append((method, config, summarize_rows(found)[0]))
+    head = ["configuration"] + [n for n, _ in ABLATION_SWITCHES] + [
+        "CD×10⁵ ↓", "F1 ↑", "NC ↑", "ECD×10² ↓", "EF1 ↑"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for method, config, summary in entries:
+        ticks = ["✓" if test(config) else "" for _, test in ABLATION_SWITCHES]
+        values = [f"{summary[c] * REPORT_SCALE.get(c, 1.0):.3f}" for c in METRIC_COLUMNS]
+        lines.append("| " + " | ".join([method] + ticks + values) + " |")
     return "\n".join(lines)
 
 
@@ -245,6 +315,8 @@ def add_parser(sub) -> None:
     p.add_argument("--res", type=int, nargs="+", default=[64])
     p.add_argument("--methods", default=",".join(REPORT_METHODS))
     p.add_argument("--samples", type=int, default=100_000)
+    p.add_argument("--ablation", action="append", default=[], metavar="LABEL=CHECKPOINT",
+                   help="an AGNDC variant's checkpoint for the ablation table (repeatable)")
     p.set_defaults(func=_cmd_report)
 
 
@@ -256,8 +328,15 @@ def _cmd_report(args) -> int:
         raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
     if not find_meshes(args.folder):
         raise AGNDCError(f"{args.folder}: no meshes found")
+    ablations = {}
+    for item in args.ablation:
+        label, sep, checkpoint = item.partition("=")
+        if not sep or not label or not Path(checkpoint).is_file():
+            raise AGNDCError(f"--ablation {item!r}: expected LABEL=CHECKPOINT (an existing "
+                             ".safetensors file)")
+        ablations[label] = checkpoint
     command = "agndc " + " ".join(shlex.quote(a) for a in sys.argv[1:])
     out = build_report(args.folder, args.out, resolutions=args.res, methods=methods,
-                       n_samples=args.samples, command=command)
+                       n_samples=args.samples, ablations=ablations, command=command)
     print(f"written: {out}")
     return 0

@@ -3,6 +3,7 @@
 import numpy as np
 import trimesh
 
+from agndc_core.checkpoint import default_checkpoint_path
 from agndc_core.grid import VoxelGrid
 from agndc_core.report import build_report, voxel_faces
 
@@ -27,10 +28,17 @@ def test_report_on_a_small_folder(tmp_path):
     trimesh.creation.box((1.0, 0.6, 0.4)).export(folder / "box.stl")
     trimesh.creation.icosphere(3, 0.5).export(folder / "ball.obj")
     out = build_report(folder, tmp_path / "report" / "results.md", resolutions=(20,),
-                       methods=("mc", "oracle"), n_samples=5_000, figure_shapes=("box",),
-                       command="agndc report test")
+                       methods=("mc", "undc", "agndc", "oracle"), n_samples=5_000,
+                       figure_shapes=("box",), command="agndc report test",
+                       ablations={"again": default_checkpoint_path("agndc")})
     text = out.read_text()
     assert "`agndc report test`" in text
     assert "## 20³: all shapes" in text and "| oracle | 2 |" in text
+    assert "AGNDC against mc: CD " in text and "AGNDC against undc: CD " in text
+    # an "ablation" that is the shipped checkpoint itself reproduces the agndc line exactly
+    ablation = text.split("## Ablation")[1].split("\n\n")[1].splitlines()
+    lines = {line.split(" | ")[0].strip("| "): line.split(" | ")[-5:] for line in ablation[2:]}
+    assert list(lines) == ["undc", "again", "agndc"]
+    assert lines["again"] == lines["agndc"]
     assert (out.parent / "results_rows" / "rows.csv").is_file()
     assert (out.parent / "results_shapes.png").stat().st_size > 10_000
