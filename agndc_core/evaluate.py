@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import time
 from pathlib import Path
 
@@ -125,6 +126,7 @@ def write_report(rows, out_dir: Path) -> dict[str, Path]:
         errors = [r for r in mine if r["error"]]
         if errors:
             text += "\nFailures:\n" + "".join(f"- {r['name']}: {r['error']}\n" for r in errors)
-        written[method] = out_dir / f"{method}.md"
+        # labels are free text (e.g. "w/o GDFEM"): keep file names to safe characters
+        written[method] = out_dir / (re.sub(r"[^\w.-]+", "_", method).strip("_") + ".md")
         written[method].write_text(text)
     return written

@@ -177,14 +177,15 @@ def _ablation_table(rows, resolution, ablation_rows) -> str:
             path = default_checkpoint_path(CHECKPOINT_NAMES[method])
             found = [r for r in rows if r["method"] == method and r["resolution"] == resolution]
         if found and path.is_file():
-            config = json.loads(path.with_suffix(".json").read_text())["model_config"]
-            entries.append((method, config, summarize_rows(found)[0]))
+            meta = json.loads(path.with_suffix(".json").read_text())
+            entries.append((method, meta, summarize_rows(found)[0]))
     head = ["configuration"] + [n for n, _ in ABLATION_SWITCHES] + [
-        "CD×10⁵ ↓", "F1 ↑", "NC ↑", "ECD×10² ↓", "EF1 ↑"]
+        "parameters", "CD×10⁵ ↓", "F1 ↑", "NC ↑", "ECD×10² ↓", "EF1 ↑"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for method, config, summary in entries:
-        ticks = ["✓" if test(config) else "" for _, test in ABLATION_SWITCHES]
-        values = [f"{summary[c] * REPORT_SCALE.get(c, 1.0):.3f}" for c in METRIC_COLUMNS]
+    for method, meta, summary in entries:
+        ticks = ["✓" if test(meta["model_config"]) else "" for _, test in ABLATION_SWITCHES]
+        values = [f"{meta['parameters']:,}"]
+        values += [f"{summary[c] * REPORT_SCALE.get(c, 1.0):.3f}" for c in METRIC_COLUMNS]
         lines.append("| " + " | ".join([method] + ticks + values) + " |")
     return "\n".join(lines)
 

@@ -30,7 +30,7 @@ def test_report_on_a_small_folder(tmp_path):
     out = build_report(folder, tmp_path / "report" / "results.md", resolutions=(20,),
                        methods=("mc", "undc", "agndc", "oracle"), n_samples=5_000,
                        figure_shapes=("box",), command="agndc report test",
-                       ablations={"again": default_checkpoint_path("agndc")})
+                       ablations={"w/o nothing": default_checkpoint_path("agndc")})
     text = out.read_text()
     assert "`agndc report test`" in text
     assert "## 20³: all shapes" in text and "| oracle | 2 |" in text
@@ -38,7 +38,8 @@ def test_report_on_a_small_folder(tmp_path):
     # an "ablation" that is the shipped checkpoint itself reproduces the agndc line exactly
     ablation = text.split("## Ablation")[1].split("\n\n")[1].splitlines()
     lines = {line.split(" | ")[0].strip("| "): line.split(" | ")[-5:] for line in ablation[2:]}
-    assert list(lines) == ["undc", "again", "agndc"]
-    assert lines["again"] == lines["agndc"]
+    assert list(lines) == ["undc", "w/o nothing", "agndc"]
+    assert lines["w/o nothing"] == lines["agndc"]
+    assert (out.parent / "results_rows" / "w_o_nothing.md").is_file()
     assert (out.parent / "results_rows" / "rows.csv").is_file()
     assert (out.parent / "results_shapes.png").stat().st_size > 10_000
