@@ -115,15 +115,11 @@ def _cmd_remesh(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import evaluate_meshes, find_meshes, markdown_table, summarize_rows, write_report
+    from .evaluate import (evaluate_meshes, markdown_table, parse_methods, require_meshes,
+                           summarize_rows, write_report)
 
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    unknown = [m for m in methods if m not in METHODS]
-    if unknown:
-        raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
-    meshes = find_meshes(args.folder)[: args.limit]
-    if not meshes:
-        raise AGNDCError(f"{args.folder}: no meshes found")
+    methods = parse_methods(args.methods)
+    meshes = require_meshes(args.folder, args.limit)
     rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples)
     written = write_report(rows, args.out)
     print(markdown_table(summarize_rows(rows)))

@@ -40,6 +40,25 @@ def find_meshes(folder: Path) -> list[tuple[Path, str]]:
     return [(p, "mesh") for p in sorted(folder.rglob("*")) if p.is_file() and is_mesh_path(p)]
 
 
+def parse_methods(text: str) -> list[str]:
+    """``"mc,agndc"`` -> ["mc", "agndc"]; unknown names raise one clear error."""
+    from .pipeline import METHODS
+
+    methods = [m.strip() for m in text.split(",") if m.strip()]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
+    return methods
+
+
+def require_meshes(folder, limit: int | None = None) -> list[tuple[Path, str]]:
+    """``find_meshes`` (the first ``limit``), refusing a folder without any."""
+    meshes = find_meshes(folder)[:limit]
+    if not meshes:
+        raise AGNDCError(f"{folder}: no meshes found")
+    return meshes
+
+
 def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkpoints=None,
                     progress=True) -> list[dict]:
     """Rows of metrics (raw, not scaled) for every mesh and method; failures become error rows."""

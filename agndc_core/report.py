@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import (METRIC_COLUMNS, evaluate_meshes, find_meshes, markdown_table,
-                       summarize_rows, write_report)
-from .pipeline import CHECKPOINT_NAMES, METHODS
+from .evaluate import (METRIC_COLUMNS, evaluate_meshes, markdown_table, parse_methods,
+                       require_meshes, summarize_rows, write_report)
+from .pipeline import CHECKPOINT_NAMES
 
 REPORT_METHODS = ("mc", "undc", "agndc", "oracle")
 CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
@@ -41,7 +41,7 @@ def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
     """
     out_md = Path(out_md)
     out_md.parent.mkdir(parents=True, exist_ok=True)
-    meshes = find_meshes(folder)
+    meshes = require_meshes(folder)
     rows = []
     for resolution in resolutions:
         rows += evaluate_meshes(meshes, methods, resolution=resolution, n_samples=n_samples)
@@ -78,8 +78,9 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
     lines += ["## Models", "", _models_table(methods), ""]
     for resolution in resolutions:
         mine = [r for r in rows if r["resolution"] == resolution]
-        lines += [f"## {resolution}³: all shapes", "", markdown_table(summarize_rows(mine)), ""]
-        lines += _comparison(summarize_rows(mine))
+        summaries = summarize_rows(mine)
+        lines += [f"## {resolution}³: all shapes", "", markdown_table(summaries), ""]
+        lines += _comparison(summaries)
         for category in _categories(mine):
             part = [r for r in mine if r["category"] == category]
             lines += [f"### {resolution}³: {category}", "",
@@ -324,11 +325,7 @@ def add_parser(sub) -> None:
 def _cmd_report(args) -> int:
     from .errors import AGNDCError
 
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    if unknown := [m for m in methods if m not in METHODS]:
-        raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}")
-    if not find_meshes(args.folder):
-        raise AGNDCError(f"{args.folder}: no meshes found")
+    methods = parse_methods(args.methods)
     ablations = {}
     for item in args.ablation:
         label, sep, checkpoint = item.partition("=")

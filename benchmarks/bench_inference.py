@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint, save_checkpoint
+from agndc_core.checkpoint import (count_parameters, default_checkpoint_path, load_checkpoint,
+                                   save_checkpoint)
 from agndc_core.contour import dual_contour
 from agndc_core.labels import crossed_edges
 from agndc_core.grid import pad_to_lattice
@@ -108,7 +109,7 @@ def model_size(spec: str) -> tuple[int, int]:
     model = build_model(spec)
     with tempfile.TemporaryDirectory() as tmp:
         path = save_checkpoint(model, Path(tmp) / "m", training={}, metrics={})
-        return sum(p.numel() for p in model.parameters()), path.stat().st_size
+        return count_parameters(model), path.stat().st_size
 
 
 def main():

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint
+from agndc_core.checkpoint import count_parameters, default_checkpoint_path, load_checkpoint
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.shapes import generate_shape
@@ -36,7 +36,7 @@ def test_shipped_checkpoint_describes_itself(name):
     assert sidecar["training"]["data"]["samples"] > 0
     model, meta = load_checkpoint(path)  # verifies the sha256 and the tensor shapes
     assert meta["model_config"] == sidecar["model_config"]
-    assert sum(p.numel() for p in model.parameters()) == sidecar["parameters"]
+    assert count_parameters(model) == sidecar["parameters"]
 
 
 def test_shipped_weights_fit_the_budget():
