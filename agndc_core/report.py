@@ -90,7 +90,8 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
     if ablation_rows:
         lines += [f"## Ablation ({resolutions[0]}³, all shapes; layout of the paper's Table 4)", "",
                   _ablation_table(rows, resolutions[0], ablation_rows), ""]
-    errors = [r for r in rows if r["error"]]
+    ablated = [r for _, found in ablation_rows.values() for r in found]
+    errors = [r for r in rows + ablated if r["error"]]
     if errors:
         lines += ["## Failures", ""] + [f"- {r['name']} {r['method']} {r['resolution']}³: "
                                         f"{r['error']}" for r in errors] + [""]
