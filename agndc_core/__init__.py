@@ -2,7 +2,7 @@
 
 Public API (re-exports only)."""
 
-from .errors import AGNDCError, GridError, GridFileError, MeshError, ModelError, NotBuiltError
+from .errors import AGNDCError, GridError, GridFileError, MeshError, ModelError
 from .grid import VoxelGrid
 
 __all__ = [
@@ -11,6 +11,5 @@ __all__ = [
     "GridFileError",
     "MeshError",
     "ModelError",
-    "NotBuiltError",
     "VoxelGrid",
 ]

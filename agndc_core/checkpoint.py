@@ -98,7 +98,11 @@ def load_checkpoint(path):
         raise ModelError(f"{weights} is corrupt or was modified: sha256 {digest[:12]}... does not "
                          f"match the {str(meta.get('weights_sha256'))[:12]}... recorded in "
                          f"{sidecar.name}")
-    config = AGNDCConfig.from_dict(meta.get("model_config"))
+    model_config = meta.get("model_config")
+    if isinstance(model_config, dict) and "surface_nets_prior" not in model_config:
+        # written before the prior existed: those networks predict absolute offsets
+        model_config = {**model_config, "surface_nets_prior": False}
+    config = AGNDCConfig.from_dict(model_config)
     model = AGNDCCascade(config)
     try:
         state = load_file(str(weights))

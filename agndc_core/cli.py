@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from .errors import AGNDCError
-from .pipeline import METHODS, TOPOLOGIES
+from .pipeline import METHODS
 
 
 def main(argv=None) -> int:
@@ -37,10 +37,11 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("input", type=Path, help="mesh (.obj .ply .stl .glb .off) or grid "
                    "(.npy .npz .binvox .vox .nii .nii.gz)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output .obj/.ply/.stl/.glb")
-    p.add_argument("--method", choices=METHODS, default="agndc")
+    p.add_argument("--method", choices=METHODS, default="agndc",
+                   help="agndc, undc (networks), surfacenets, mc, mc_taubin (no weights), "
+                   "oracle (mesh input only)")
     p.add_argument("--res", type=int, default=64, help="voxels on the longest side (mesh input)")
     p.add_argument("--checkpoint", type=Path, help="weights (.safetensors); default: shipped")
-    p.add_argument("--topology", choices=TOPOLOGIES, default="input")
     p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
     p.add_argument("--threads", type=int, help="CPU threads for the network")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
@@ -54,6 +55,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--res", type=int, default=64)
     p.add_argument("--samples", type=int, default=100_000)
     p.add_argument("--limit", type=int, help="only the first N meshes")
+    p.add_argument("--checkpoint", action="append", default=[], metavar="METHOD=PATH",
+                   help="weights for a learned method instead of the shipped ones, e.g. "
+                   "agndc=runs/x/final.safetensors (repeatable)")
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("demo", help="generate a CAD part, voxelise, reconstruct, compare")
@@ -94,7 +98,7 @@ def _cmd_remesh(args) -> int:
 
     bar, update = _progress_bar(args.input.name)
     options = dict(method=args.method, checkpoint=args.checkpoint, threads=args.threads,
-                   topology=args.topology, device=args.device, progress=update,
+                   device=args.device, progress=update,
                    min_component_faces=args.min_component_faces)
     try:
         if is_grid_path(args.input):
@@ -115,14 +119,25 @@ def _cmd_remesh(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (evaluate_meshes, markdown_table, parse_methods, require_meshes,
-                           summarize_rows, write_report)
+    from .evaluate import (evaluate_meshes, headroom_line, markdown_table, parse_methods,
+                           require_meshes, summarize_rows, write_report)
 
     methods = parse_methods(args.methods)
+    checkpoints = {}
+    for item in args.checkpoint:
+        method, _, path = item.partition("=")
+        if method not in ("agndc", "undc") or not path:
+            raise AGNDCError(f"--checkpoint wants agndc=PATH or undc=PATH, got {item!r}")
+        checkpoints[method] = Path(path)
     meshes = require_meshes(args.folder, args.limit)
-    rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples)
+    rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples,
+                           checkpoints=checkpoints)
     written = write_report(rows, args.out)
-    print(markdown_table(summarize_rows(rows)))
+    summaries = summarize_rows(rows)
+    print(markdown_table(summaries))
+    headroom = headroom_line(summaries)  # "" unless both mc and oracle were evaluated
+    if headroom:
+        print(headroom)
     print("written: " + ", ".join(str(p) for p in written.values()))
     return 1 if any(r["error"] for r in rows) else 0
 
@@ -132,11 +147,11 @@ def _cmd_demo(args) -> int:
     from .gridio import save_grid, save_mesh
     from .metrics import evaluate
     from .pipeline import remesh_mesh
-    from .shapes import generate_shape
+    from .shapes import cad_part
 
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
-    vertices, faces = generate_shape(args.seed)
+    vertices, faces = cad_part(args.seed)
     save_mesh(vertices, faces, out / "part.obj")
     methods = ["mc", "oracle"] + [m for m in ("undc", "agndc") if _has_weights(m)]
     rows = []

@@ -4,6 +4,21 @@ Every occupied lattice edge becomes the quad of the four cells around it, split 
 triangles. With binary input the two end points of a crossed edge tell inside from outside, so
 each quad is oriented to face from the inside end point to the outside one (outward for solids).
 
+**Manifold output** (when ``inside`` is given). One vertex per cell glues surfaces that only touch
+along a voxel edge or at a voxel corner. Instead, each cell gets one vertex per *surface patch*:
+its 8 corners are grouped into inside components (6-connected: along the 12 cube edges) and
+outside components (18-connected: cube edges and face diagonals, not body diagonals), and a
+crossed edge belongs to the patch (inside component, outside component) of its two end points.
+An ambiguous face (inside corners on one diagonal) thereby separates its inside corners and joins
+its outside ones in *both* cells that share it, so neighbours agree, and every patch is a disk with
+one boundary loop (checked in the tests for all 256 cases). One configuration needs more: a face
+whose two inside corners are joined through the interior of both cells that share it. The surface
+is then a thin tube through the face (the outside passes between the inside corners), which two
+cell vertices cannot span (their edge would carry four faces); each of the face's two boundary
+segments gets a vertex of its own on the face (``_tube_vertices``), which splits one triangle of
+each of the face's four quads in two. The result is a closed, oriented 2-manifold whose
+components are the surfaces between 6-connected inside and 18-connected outside regions.
+
 ``dual_contour`` is a short pipeline of named, vectorised stages; ``contour_naive.py`` holds the
 slow cell-by-cell reference that tests compare against exactly (same vertex order, same faces).
 Coordinates are lattice coordinates (grid.py): the vertex of cell c is ``c + offset``.
@@ -13,8 +28,139 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import AGNDCError
+
 #: For axis a, the two other axes in cyclic order: quads listed in this order face +a.
 OTHER_AXES = ((1, 2), (2, 0), (0, 1))
+
+
+class ContourError(AGNDCError, ValueError):
+    """Inputs of ``dual_contour`` that contradict each other."""
+
+
+# --- the cell tables: corners, edges and faces of one cell, and the patches of its 256 cases ---
+
+#: (8, 3) offset of corner k from the cell's min corner: k = x + 2 y + 4 z
+CORNERS = np.array([[(k >> d) & 1 for d in range(3)] for k in range(8)], dtype=np.int64)
+
+
+def _corner_index(offset) -> int:
+    return int(offset[0]) + 2 * int(offset[1]) + 4 * int(offset[2])
+
+
+def _cell_edges() -> np.ndarray:
+    """(12, 2) end corners of the cell edges; edge 4 a + 2 db + dc runs along axis a from the
+    corner db e_b + dc e_c ((b, c) = OTHER_AXES[a])."""
+    edges = []
+    for axis, (b, c) in enumerate(OTHER_AXES):
+        for db in (0, 1):
+            for dc in (0, 1):
+                start = np.zeros(3, dtype=np.int64)
+                start[b], start[c] = db, dc
+                end = start.copy()
+                end[axis] = 1
+                edges.append((_corner_index(start), _corner_index(end)))
+    return np.array(edges, dtype=np.int64)
+
+
+def _cell_faces() -> np.ndarray:
+    """(6, 4) corners of cell face 2 n + side (normal axis n, side 0 = low), in cyclic order."""
+    faces = []
+    for n, (b, c) in enumerate(OTHER_AXES):
+        for side in (0, 1):
+            ring = []
+            for db, dc in ((0, 0), (1, 0), (1, 1), (0, 1)):
+                offset = np.zeros(3, dtype=np.int64)
+                offset[n], offset[b], offset[c] = side, db, dc
+                ring.append(_corner_index(offset))
+            faces.append(ring)
+    return np.array(faces, dtype=np.int64)
+
+
+CELL_EDGES = _cell_edges()
+CELL_FACES = _cell_faces()
+#: (12, 3) midpoint of each cell edge, relative to the cell's min corner
+EDGE_MIDPOINTS = (CORNERS[CELL_EDGES[:, 0]] + CORNERS[CELL_EDGES[:, 1]]) / 2.0
+
+
+def _components(n_nodes: int, links) -> np.ndarray:
+    """(n_nodes,) label = smallest node of its component, for an undirected list of links."""
+    label = list(range(n_nodes))
+    changed = True
+    while changed:  # tiny graphs (8 nodes): relax until stable
+        changed = False
+        for u, v in links:
+            low = min(label[u], label[v])
+            if label[u] != low or label[v] != low:
+                label[u] = label[v] = low
+                changed = True
+    return np.array(label, dtype=np.int64)
+
+
+def cell_patches(config: int) -> np.ndarray:
+    """(12,) patch id of each cell edge for corner configuration ``config`` (bit k: corner k
+    inside), -1 where the edge is not crossed. Patches are numbered in order of their first edge.
+
+    Inside corners are linked along cube edges (6-connectivity), outside corners along cube edges
+    and face diagonals (18-connectivity); a crossed edge's patch is the pair of components of
+    its inside and its outside end point.
+    """
+    inside = [(config >> k) & 1 == 1 for k in range(8)]
+    cube = [tuple(e) for e in CELL_EDGES]
+    diagonals = [(f[0], f[2]) for f in CELL_FACES] + [(f[1], f[3]) for f in CELL_FACES]
+    in_label = _components(8, [(u, v) for u, v in cube if inside[u] and inside[v]])
+    out_label = _components(8, [(u, v) for u, v in cube + diagonals
+                                if not inside[u] and not inside[v]])
+    patches: dict[tuple[int, int], int] = {}
+    ids = np.full(12, -1, dtype=np.int64)
+    for edge, (u, v) in enumerate(cube):
+        if inside[u] == inside[v]:
+            continue
+        key = (in_label[u], out_label[v]) if inside[u] else (in_label[v], out_label[u])
+        ids[edge] = patches.setdefault(key, len(patches))
+    return ids
+
+
+def _patch_tables():
+    """Tables over the 256 corner configurations, built from ``cell_patches``.
+
+    Returns:
+        patch: (256, 12) int8 patch of each cell edge (-1: not crossed);
+        count: (256,) int64 number of patches;
+        shift: (256, P, 3) float64 the patch's surface-nets point (mean of its crossed-edge
+            midpoints) minus the whole cell's surface-nets offset as ``surface_nets_offsets``
+            computes it (float32);
+        joined: (256, 6) bool, face 2 n + side is ambiguous (4 crossed edges) and its two inside
+            corners are in one inside component of the cell.
+    """
+    patch = np.stack([cell_patches(config) for config in range(256)])
+    count = patch.max(axis=1) + 1
+    shift = np.zeros((256, max(int(count.max()), 1), 3))
+    joined = np.zeros((256, 6), dtype=bool)
+    face_edges = _face_edges()
+    for config in range(256):
+        crossed = patch[config] >= 0
+        if not crossed.any():
+            continue
+        cell_mean = np.float32(EDGE_MIDPOINTS[crossed].mean(axis=0)).astype(np.float64)
+        for p in range(count[config]):
+            shift[config, p] = EDGE_MIDPOINTS[patch[config] == p].mean(axis=0) - cell_mean
+        for face in range(6):
+            ids = patch[config, face_edges[face]]
+            # the ambiguous face's edges alternate between its two inside corners' segments;
+            # one patch for all four means the inside corners are joined through the cell
+            joined[config, face] = bool(np.all(ids >= 0) and np.all(ids == ids[0]))
+    return patch.astype(np.int8), count.astype(np.int64), shift, joined
+
+
+def _face_edges() -> np.ndarray:
+    """(6, 4) cell edges around each cell face, in the face's cyclic order."""
+    lookup = {frozenset(map(int, e)): i for i, e in enumerate(CELL_EDGES)}
+    return np.array([[lookup[frozenset((int(f[i]), int(f[(i + 1) % 4])))] for i in range(4)]
+                     for f in CELL_FACES], dtype=np.int64)
+
+
+PATCH, PATCH_COUNT, PATCH_SHIFT, FACE_JOINED = _patch_tables()
 
 
 def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarray | None = None, *,
@@ -25,26 +171,217 @@ def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarra
         vertex_dx3: (Dx, Dy, Dz, 3) float offsets of each cell's vertex from its min corner
             (clipped into [0, 1]).
         edge_dx3: (Dx, Dy, Dz, 3) bool, edge from point p along +axis is crossed.
-        inside: optional (Dx, Dy, Dz) bool point occupancy, used to orient the quads outward.
-            Edges whose end points agree (only possible with predicted edges) keep the +axis order.
+        inside: optional (Dx, Dy, Dz) bool point occupancy. When given, ``edge_dx3`` must be its
+            crossing parity (``labels.crossed_edges(inside)``, else ContourError); the quads face
+            outward and the output is a closed 2-manifold (module docstring): a cell with
+            several surface patches gets one vertex per patch, placed at the patch's own
+            surface-nets point moved by the cell's correction (``vertex_dx3`` minus the cell's
+            surface-nets offset). Without it: one vertex per cell, quads face +axis.
         min_component_faces: drop connected components with fewer faces than this.
         merge_vertices: merge vertices that coincide (e.g. cells whose vertices were clipped
-            onto a shared face).
+            onto a shared face); this may undo the manifold split.
 
     Returns:
         vertices: (V, 3) float64 lattice coordinates; faces: (F, 3) int64. Empty input gives
         zero-size arrays of these shapes.
     """
+    if inside is not None:
+        inside = np.asarray(inside, dtype=bool)
+        _check_parity(edge_dx3, inside)
     points, axes = _occupied_edges(edge_dx3)
     quads = _quad_cells(points, axes)  # (E, 4, 3)
-    quads = _orient_quads(quads, points, axes, inside)
-    vertices, quad_ids = _compact_vertices(quads, vertex_dx3)
-    faces = _split_quads(quad_ids, vertices)
+    if inside is None:
+        vertices, quad_ids = _compact_vertices(quads, vertex_dx3)
+        faces = _split_quads(quad_ids, vertices)
+    else:
+        vertices, faces = _contour_patches(quads, points, axes, vertex_dx3, inside)
     if merge_vertices:
         vertices, faces = _merge_vertices(vertices, faces)
     if min_component_faces > 0:
         vertices, faces = drop_small_components(vertices, faces, min_component_faces)
     return vertices, faces
+
+
+def _check_parity(edge_dx3: np.ndarray, inside: np.ndarray) -> None:
+    """Patches come from the corner values, so the edges must be exactly their sign changes."""
+    if inside.shape != edge_dx3.shape[:3]:
+        raise ContourError(f"inside has shape {inside.shape}, the edges {edge_dx3.shape[:3]}")
+    edge = np.asarray(edge_dx3, dtype=bool)
+    differ = 0
+    for axis in range(3):  # crossed_edges(inside) axis by axis, without the (D, 3) copy
+        low, high, last = [slice(None)] * 3, [slice(None)] * 3, [slice(None)] * 3
+        low[axis], high[axis], last[axis] = slice(0, -1), slice(1, None), -1
+        parity = inside[tuple(low)] != inside[tuple(high)]
+        differ += np.count_nonzero(edge[..., axis][tuple(low)] != parity)
+        differ += np.count_nonzero(edge[..., axis][tuple(last)])
+    if differ:
+        raise ContourError(
+            f"{differ} edges differ from the crossing parity of `inside`: manifold dual "
+            "contouring needs edges = labels.crossed_edges(inside) (input topology); pass "
+            "inside=None to contour predicted edges"
+        )
+
+
+def _contour_patches(quads, points, axes, vertex_dx3, inside):
+    """The manifold path: one vertex per (cell, patch), plus a pair per tube face."""
+    shape = inside.shape
+    if len(quads) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    cells, cell_ids = _used_cells(quads, shape)  # (C,) flat, (E, 4)
+    config = _cell_configs(cells, inside)  # (C,) uint8
+    local = _quad_local_edges(axes)  # (E, 4) cell edge of each quad corner
+    first = np.cumsum(PATCH_COUNT[config]) - PATCH_COUNT[config]  # (C,) first vertex of a cell
+    quad_ids = first[cell_ids] + PATCH[config[cell_ids], local]  # (E, 4)
+    vertices = _patch_vertices(cells, config, first, vertex_dx3)
+    tube_sides = _tube_sides(config, cell_ids, axes)  # (E, 4) bool
+    extra, side_ids = _tube_vertices(tube_sides, quads, points, axes, inside, len(vertices))
+    flip = _outward_flip(points, axes, inside)
+    quad_ids[flip] = quad_ids[flip][:, ::-1]
+    # reversing corners 0..3 maps side i (corners i, i+1) to old side 2 - i (mod 4)
+    side_ids[flip] = side_ids[flip][:, [2, 1, 0, 3]]
+    vertices = np.concatenate([vertices, extra])
+    faces = _split_quads(quad_ids, vertices)
+    return vertices, _split_tube_sides(faces, quad_ids, side_ids, vertices)
+
+
+def _used_cells(quads: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
+    """Flat ids (C,) of the cells the quads use, in C order, and (E, 4) index into them."""
+    flat = np.ravel_multi_index(quads.reshape(-1, 3).T, shape)
+    # a dense mark + rank over the lattice is several times faster than np.unique's sort
+    used = np.zeros(int(np.prod(shape)), dtype=bool)
+    used[flat] = True
+    cells = np.flatnonzero(used)
+    rank = np.zeros(used.size, dtype=np.int64)
+    rank[cells] = np.arange(len(cells))
+    return cells, rank[flat].reshape(-1, 4)
+
+
+def _cell_configs(cells: np.ndarray, inside: np.ndarray) -> np.ndarray:
+    """(C,) uint8 corner configuration of each flat cell id: bit k = corner k is inside."""
+    strides = np.array([inside.shape[1] * inside.shape[2], inside.shape[2], 1])
+    flat_inside = np.asarray(inside, dtype=bool).reshape(-1)
+    config = np.zeros(len(cells), dtype=np.uint8)
+    for k, corner in enumerate(CORNERS @ strides):
+        config |= flat_inside[cells + corner].astype(np.uint8) << k
+    return config
+
+
+def _quad_local_edges(axes: np.ndarray) -> np.ndarray:
+    """(E, 4) edge index, inside each quad cell, of the quad's lattice edge.
+
+    Quad corner j is cell p - db e_b - dc e_c with (db, dc) = (1, 1), (0, 1), (0, 0), (1, 0),
+    so the edge leaves that cell's corner db e_b + dc e_c: cell edge 4 a + 2 db + dc.
+    """
+    return 4 * axes[:, None] + np.array([3, 1, 0, 2])
+
+
+def _patch_vertices(cells, config, first, vertex_dx3) -> np.ndarray:
+    """(V, 3) float64 vertex of each (cell, patch): cells in C order, then patches in id order.
+
+    A cell with one patch keeps ``cell + clip(offset)``; with several, each patch's vertex is its
+    own surface-nets point plus the cell's correction (offset - the cell's surface-nets offset).
+    """
+    count = PATCH_COUNT[config]
+    owner = np.repeat(np.arange(len(cells)), count)  # (V,) cell of each vertex
+    patch = np.arange(len(owner)) - first[owner]
+    offset = vertex_dx3.reshape(-1, 3)[cells[owner]].astype(np.float64)
+    several = count[owner] > 1
+    offset[several] += PATCH_SHIFT[config[owner[several]], patch[several]]
+    corner = np.stack(np.unravel_index(cells[owner], vertex_dx3.shape[:3]), axis=1)
+    return corner + np.clip(offset, 0.0, 1.0)
+
+
+#: quad side i joins corners i and i + 1 (mod 4) across a face; per side: which other axis it
+#: steps along (0: b, 1: c), the face's side (0 low, 1 high) in corner i's cell, and the corner
+#: whose cell lies on the face's high side
+_SIDE_AXIS_SLOT = np.array([0, 1, 0, 1])  # side i steps along b (0) or c (1)
+_SIDE_FROM = np.array([1, 1, 0, 0])
+_SIDE_HIGHER = np.array([1, 2, 2, 3])
+
+
+def _side_normals(axes: np.ndarray) -> np.ndarray:
+    """(E, 4) normal axis of the face dual to each quad side."""
+    other = np.array(OTHER_AXES)[axes]  # (E, 2)
+    return other[:, _SIDE_AXIS_SLOT]
+
+
+def _tube_sides(config, cell_ids, axes) -> np.ndarray:
+    """(E, 4) bool: quad side i crosses a face whose inside corners both cells join (a tube)."""
+    tube = np.zeros(cell_ids.shape, dtype=bool)
+    # rare: only quads with a cell that joins some face's inside corners can have one
+    maybe = np.flatnonzero(FACE_JOINED.any(axis=1)[config][cell_ids].any(axis=1))
+    corner_config = config[cell_ids[maybe]]  # (M, 4)
+    normal = _side_normals(axes[maybe])
+    face_from = 2 * normal + _SIDE_FROM
+    face_to = 2 * normal + 1 - _SIDE_FROM
+    nxt = corner_config[:, [1, 2, 3, 0]]
+    tube[maybe] = FACE_JOINED[corner_config, face_from] & FACE_JOINED[nxt, face_to]
+    return tube
+
+
+def _tube_vertices(tube_sides, quads, points, axes, inside, base: int):
+    """The vertices of the tube faces' segments, one per (face, inside corner of the face).
+
+    Numbered from ``base`` in order of (face normal, the face's high cell, inside corner), each
+    at the midpoint of its inside corner and the face centre (the mean of its segment's two
+    crossed-edge midpoints).
+
+    Returns:
+        extra: (T, 3) float64 positions; side_ids: (E, 4) int64 vertex of each quad side, -1
+        where the side crosses no tube face.
+    """
+    side_ids = np.full(tube_sides.shape, -1, dtype=np.int64)
+    quad, side = np.nonzero(tube_sides)
+    if len(quad) == 0:
+        return np.zeros((0, 3)), side_ids
+    shape = np.array(inside.shape)
+    normal = _side_normals(axes)[quad, side]
+    high = quads[quad, _SIDE_HIGHER[side]]  # (T, 3) cell on the face's high side
+    near, axis = points[quad], axes[quad]
+    far = near + np.eye(3, dtype=np.int64)[axis]
+    corner = np.where(inside[tuple(near.T)][:, None], near, far)  # the edge's inside end
+    n_flat = int(np.prod(shape))
+    key = (normal * n_flat + np.ravel_multi_index(high.T, shape)) * n_flat
+    key += np.ravel_multi_index(corner.T, shape)
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    side_ids[quad, side] = base + inverse.reshape(-1)
+    centre = high[first] + 0.5 - 0.5 * np.eye(3)[normal[first]]
+    return (corner[first] + centre) / 2.0, side_ids
+
+
+def _outward_flip(points, axes, inside) -> np.ndarray:
+    """(E,) bool: the quad's inside end point is the far one (its surface faces -axis)."""
+    far = points + np.eye(3, dtype=np.int64)[axes]
+    return inside[tuple(far.T)] & ~inside[tuple(points.T)]
+
+
+#: for a quad split along a-c (row 0) or b-d (row 1): quad side i -> (triangle 0/1, position of
+#: the side's first vertex in that triangle)
+_SIDE_IN_TRIANGLE = np.array([[[0, 0], [0, 1], [1, 1], [1, 2]],
+                              [[0, 0], [1, 0], [1, 1], [0, 2]]])
+
+
+def _split_tube_sides(faces, quad_ids, side_ids, vertices) -> np.ndarray:
+    """Put each tube vertex into the triangle holding its quad side.
+
+    Triangle (x, y, z) with the vertex t on side x -> y becomes (x, t, z) in place, and (t, y, z)
+    is appended (in order of quad, then side). No triangle holds two tube sides (its two quad
+    sides share a cell, and no cell joins the inside corners of two faces with a common edge).
+    """
+    quad, side = np.nonzero(side_ids >= 0)
+    if len(quad) == 0:
+        return faces
+    a, b, c, d = quad_ids[quad].T
+    use_ac = np.linalg.norm(vertices[a] - vertices[c], axis=1) <= np.linalg.norm(
+        vertices[b] - vertices[d], axis=1)
+    triangle, start = _SIDE_IN_TRIANGLE[(~use_ac).astype(np.int64), side].T
+    row = 2 * quad + triangle
+    rolled = faces[row][np.arange(len(row))[:, None], (start[:, None] + np.arange(3)) % 3]
+    x, y, z = rolled.T
+    t = side_ids[quad, side]
+    faces = faces.copy()
+    faces[row] = np.stack([x, t, z], axis=1)
+    return np.concatenate([faces, np.stack([t, y, z], axis=1)])
 
 
 def _occupied_edges(edge_dx3: np.ndarray):
@@ -71,19 +408,6 @@ def _quad_cells(points: np.ndarray, axes: np.ndarray) -> np.ndarray:
     e_b = unit[[OTHER_AXES[a][0] for a in range(3)]][axes]  # (E, 3)
     e_c = unit[[OTHER_AXES[a][1] for a in range(3)]][axes]
     return np.stack([points - e_b - e_c, points - e_c, points, points - e_b], axis=1)
-
-
-def _orient_quads(quads, points, axes, inside):
-    """Reverse the quads whose inside end point is the far one (their surface faces -axis)."""
-    if inside is None or len(points) == 0:
-        return quads
-    far = points + np.eye(3, dtype=np.int64)[axes]
-    near_in = inside[tuple(points.T)]
-    far_in = inside[tuple(far.T)]
-    flip = far_in & ~near_in
-    quads = quads.copy()
-    quads[flip] = quads[flip][:, ::-1]
-    return quads
 
 
 def _compact_vertices(quads: np.ndarray, vertex_dx3: np.ndarray):

@@ -23,9 +23,5 @@ class ModelError(AGNDCError):
     """A checkpoint is missing, malformed, or does not match its config."""
 
 
-class NotBuiltError(AGNDCError):
-    """A method or feature that this version does not provide yet."""
-
-
 class CancelledError(AGNDCError):
     """The user cancelled a long operation (Esc in Blender, Ctrl-C in the CLI)."""

@@ -16,24 +16,27 @@ Meshes (``load_mesh`` / ``save_mesh``) go through trimesh.
 
 Every missing, corrupt, truncated or unsupported file raises ``GridFileError`` with a message
 that names the file; grid *content* problems (non-binary values, wrong shape, too large) are
-``GridError`` from ``grid.py``, and unusable meshes are ``MeshError``.
+``GridError`` from ``grid.py``, and unusable meshes are ``MeshError``. No other exception type
+escapes: what a parser raises on corrupt bytes is wrapped (``_reading``), and sizes a header
+declares are checked against ``grid.MAX_VOXELS`` and against the bytes the file holds before
+anything is allocated. ``tests/core/test_fuzz_readers.py`` checks this on mutated files.
 """
 
 from __future__ import annotations
 
 import gzip
 import io
-import struct
+import math
 import zipfile
-import zlib
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .errors import GridFileError
+from .errors import AGNDCError, GridFileError
 from .formats.binvox import guard_size, read_binvox, write_binvox
 from .formats.vox import read_vox, write_vox
-from .grid import VoxelGrid
+from .grid import MAX_VOXELS, VoxelGrid
 from .voxelize import check_mesh
 
 GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
@@ -43,9 +46,10 @@ MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 MESH_SAVE_EXTENSIONS = (".obj", ".ply", ".stl", ".glb")
 #: array names tried in order when reading an .npz
 NPZ_ARRAY_NAMES = ("occupancy", "grid", "voxels", "data")
-#: errors numpy, zipfile and nibabel raise for unreadable files
-_FILE_ERRORS = (OSError, EOFError, ValueError, KeyError, struct.error, zlib.error,
-                zipfile.BadZipFile)
+NPY_MAGIC = b"\x93NUMPY"
+ZIP_MAGIC = b"PK\x03\x04"
+#: bytes read at a time when measuring a compressed NIfTI's payload
+_CHUNK = 1 << 20
 
 
 def is_grid_path(path) -> bool:
@@ -142,18 +146,25 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     _require_extension(path, MESH_EXTENSIONS, "mesh")
     _require_file(path)
-    try:
-        loaded = trimesh.load(path, force="mesh", process=False)
-    except Exception as exc:  # trimesh's format loaders raise anything, ValueError to struct.error
-        raise GridFileError(f"{path.name}: cannot read the mesh ({_describe(exc)})") from None
-    vertices = getattr(loaded, "vertices", np.zeros((0, 3)))
-    faces = getattr(loaded, "faces", None)
-    faces = np.zeros((0, 3), dtype=np.int64) if faces is None else faces
-    vertices, faces = check_mesh(vertices, faces, source=path.name)
-    # merge after the checks: trimesh's own processing would silently drop non-finite vertices
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    mesh.remove_unreferenced_vertices()
-    mesh.merge_vertices()
+    with _reading(path.name, "cannot read the mesh"):
+        try:
+            loaded = trimesh.load(path, force="mesh", process=False)
+        except ModuleNotFoundError as exc:
+            if exc.name != "charset_normalizer":
+                raise
+            # trimesh guesses the encoding of non-UTF-8 text with this optional package
+            raise GridFileError(f"{path.name}: cannot read the mesh: its text is not UTF-8 "
+                                "(or its binary data is corrupt)") from None
+    # check (non-empty, faces in range, finite, (V, 3)) before merging: trimesh's processing
+    # would silently drop non-finite vertices; a loader's odd output is still a named error
+    with _reading(path.name, "unusable mesh data"):
+        vertices = getattr(loaded, "vertices", np.zeros((0, 3)))
+        faces = getattr(loaded, "faces", None)
+        faces = np.zeros((0, 3), dtype=np.int64) if faces is None else faces
+        vertices, faces = check_mesh(vertices, faces, source=path.name)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        mesh.remove_unreferenced_vertices()
+        mesh.merge_vertices()
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
 
 
@@ -181,63 +192,140 @@ def save_mesh(vertices, faces, path) -> None:
 
 
 def _read_npy(path: Path) -> np.ndarray:
-    try:
-        array = np.load(path, allow_pickle=False)
-    except _FILE_ERRORS as exc:
-        raise GridFileError(f"{path.name}: not a readable .npy file ({_describe(exc)})") from None
-    if not isinstance(array, np.ndarray):  # np.load opens zip archives whatever the extension
-        array.close()
-        raise GridFileError(f"{path.name}: this is an .npz archive, not an .npy array")
-    return array
+    name = path.name
+    with _reading(name, "not a readable .npy file"), path.open("rb") as file:
+        if file.read(len(ZIP_MAGIC)) == ZIP_MAGIC:  # np.save never writes a zip
+            raise GridFileError(f"{name}: this is an .npz archive, not an .npy array")
+        file.seek(0)
+        return _npy_data(file, path.stat().st_size, _npy_header(file, name), name)
 
 
 def _read_npz(path: Path) -> VoxelGrid:
-    """The occupancy array (see NPZ_ARRAY_NAMES) and its placement, if the archive stores one."""
+    """The occupancy array (see NPZ_ARRAY_NAMES) and its placement, if the archive stores one.
+
+    Only those arrays are decompressed, one at a time, so memory stays within one grid whatever
+    the other members hold.
+    """
     name = path.name
-    try:
-        archive = np.load(path, allow_pickle=False)
-        if not isinstance(archive, np.lib.npyio.NpzFile):
-            raise GridFileError(f"{name}: this is an .npy array, not an .npz archive")
-        with archive:
-            arrays = {key: archive[key] for key in archive.files}  # decompresses everything here
-    except _FILE_ERRORS as exc:
-        raise GridFileError(f"{name}: not a readable .npz archive ({_describe(exc)})") from None
-    occupancy = arrays[_npz_occupancy_key(arrays, name)]
-    if "affine" in arrays:
-        return VoxelGrid(occupancy, arrays["affine"], source=name)
-    if "voxel_size" in arrays and "origin" in arrays:
-        return VoxelGrid.from_spacing(occupancy, arrays["voxel_size"], arrays["origin"],
-                                      source=name)
+    with _reading(name, "not a readable .npz archive"):
+        with path.open("rb") as file:
+            if file.read(len(NPY_MAGIC)) == NPY_MAGIC:
+                raise GridFileError(f"{name}: this is an .npy array, not an .npz archive")
+        with zipfile.ZipFile(path) as archive:
+            # np.savez writes one <key>.npy member per array
+            members = {info.filename[:-4]: info for info in archive.infolist()
+                       if info.filename.endswith(".npy")}
+            shapes = {key: _npz_member(archive, info, name, header_only=True)[0]
+                      for key, info in members.items()}
+            wanted = [_npz_occupancy_key(shapes, name)]
+            wanted += [key for key in ("affine", "voxel_size", "origin") if key in members]
+            arrays = {key: _npz_member(archive, members[key], name) for key in wanted}
+    occupancy = arrays.pop(wanted[0])
+    # placement arrays of the wrong shape or type: numpy's error, named and wrapped
+    with _reading(name, "unusable affine, voxel_size or origin array"):
+        if "affine" in arrays:
+            return VoxelGrid(occupancy, arrays["affine"], source=name)
+        if "voxel_size" in arrays and "origin" in arrays:
+            return VoxelGrid.from_spacing(occupancy, arrays["voxel_size"], arrays["origin"],
+                                          source=name)
     return VoxelGrid(occupancy, source=name)
 
 
-def _npz_occupancy_key(arrays: dict, name: str) -> str:
+def _npz_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, *,
+                header_only: bool = False):
+    """One member's array, or only its header ``(shape, fortran_order, dtype)``."""
+    label = f"{name}: member {info.filename}"
+    with _reading(label, "not a readable .npy array"), archive.open(info) as member:
+        header = _npy_header(member, label)
+        return header if header_only else _npy_data(member, info.file_size, header, label)
+
+
+def _npy_header(stream, label: str) -> tuple[tuple, bool, np.dtype]:
+    """Parse an .npy header; refuse object arrays and arrays beyond ``MAX_VOXELS`` elements.
+
+    numpy's own ``np.load`` allocates whatever the header claims before it reads the data, and
+    its header parser leaks ``TokenError``/``SyntaxError`` (``_reading`` wraps those).
+    """
+    version = np.lib.format.read_magic(stream)
+    if version == (1, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_1_0(stream)
+    elif version == (2, 0):
+        shape, fortran_order, dtype = np.lib.format.read_array_header_2_0(stream)
+    else:
+        raise GridFileError(f"{label}: unsupported .npy format version {version}")
+    if dtype.hasobject:
+        raise GridFileError(f"{label}: the array holds Python objects, which are never loaded")
+    if math.prod(shape) > MAX_VOXELS:  # Python ints: a corrupt header cannot overflow this
+        raise GridFileError(f"{label}: the header claims an array of shape {shape}, more than "
+                            f"the {MAX_VOXELS:,}-voxel limit")
+    return shape, fortran_order, dtype
+
+
+def _npy_data(stream, size: int, header: tuple, label: str) -> np.ndarray:
+    """The array after an .npy header, read only if the ``size``-byte stream holds all of it."""
+    shape, fortran_order, dtype = header
+    count = math.prod(shape)
+    n_bytes = count * dtype.itemsize
+    available = size - stream.tell()
+    data = stream.read(n_bytes) if n_bytes <= available else b""
+    if len(data) < n_bytes:
+        raise GridFileError(f"{label}: truncated .npy data: the header's {shape} {dtype} array "
+                            f"needs {n_bytes:,} bytes, {max(available, 0):,} are left")
+    if dtype == bool:  # bytes other than 0/1 would make invalid numpy bools
+        flat = np.frombuffer(data, dtype=np.uint8, count=count) != 0
+    else:
+        flat = np.frombuffer(data, dtype=dtype, count=count).copy()  # writable, like np.load
+    return flat.reshape(shape, order="F" if fortran_order else "C")
+
+
+def _npz_occupancy_key(shapes: dict, name: str) -> str:
+    """Which member is the grid: the first of NPZ_ARRAY_NAMES present, else the only 3-D one."""
     for key in NPZ_ARRAY_NAMES:
-        if key in arrays:
+        if key in shapes:
             return key
-    grids = [key for key, array in arrays.items() if array.ndim == 3]
+    grids = [key for key, shape in shapes.items() if len(shape) == 3]
     if len(grids) == 1:
         return grids[0]
     raise GridFileError(
         f"{name}: cannot tell which array is the grid: no array named "
-        f"{'/'.join(NPZ_ARRAY_NAMES)} and {len(grids)} 3-D arrays among {sorted(arrays)}"
+        f"{'/'.join(NPZ_ARRAY_NAMES)} and {len(grids)} 3-D arrays among {sorted(shapes)}"
     )
 
 
 def _read_nifti(path: Path) -> VoxelGrid:
     import nibabel as nib
-    from nibabel.filebasedimages import ImageFileError
 
     name = path.name
-    try:
-        image = nib.load(path, mmap=False)
+    with _reading(name, "not a readable NIfTI file"):
+        image = nib.load(path, mmap=False)  # parses the header only
         shape = _drop_trailing_ones(image.shape)  # (X, Y, Z, 1) volumes are common
         guard_size(shape, name)  # before reading the voxel data
+        _require_nifti_data(path, image.header, shape)
         data = np.asanyarray(image.dataobj).reshape(shape)
         affine = image.affine
-    except (ImageFileError, *_FILE_ERRORS) as exc:
-        raise GridFileError(f"{name}: not a readable NIfTI file ({_describe(exc)})") from None
     return VoxelGrid(_label_occupancy(data), affine, source=name)
+
+
+def _require_nifti_data(path: Path, header, shape: tuple) -> None:
+    """Refuse a NIfTI file shorter than its header says: nibabel allocates the full voxel array
+    before it reads, so a truncated file would cost that memory before failing."""
+    if min(shape) < 0:
+        raise GridFileError(f"{path.name}: corrupt NIfTI header: negative dimension in {shape}")
+    dtype = header.get_data_dtype()
+    needed = int(header.get_data_offset()) + math.prod(shape) * dtype.itemsize
+    if path.name.lower().endswith(".gz"):
+        available = 0
+        with gzip.open(path, "rb") as file:  # count the payload without keeping it
+            while available < needed:
+                chunk = file.read(min(_CHUNK, needed - available))
+                if not chunk:
+                    break
+                available += len(chunk)
+    else:
+        available = path.stat().st_size
+    if available < needed:
+        raise GridFileError(f"{path.name}: truncated NIfTI file: the header's {shape} {dtype} "
+                            f"voxels need {needed:,} bytes, the file holds {available:,}")
 
 
 def _drop_trailing_ones(shape: tuple) -> tuple:
@@ -312,7 +400,25 @@ def _write_bytes(path: Path, data: bytes) -> None:
         raise GridFileError(f"{path.name}: cannot write the file ({_describe(exc)})") from None
 
 
+@contextmanager
+def _reading(name: str, problem: str):
+    """Turn any exception a file parser raises into one GridFileError naming file and problem.
+
+    Parsers fed corrupt bytes raise nearly anything (numpy's header parser ``TokenError`` or
+    ``SyntaxError``, nibabel ``HeaderDataError``, trimesh ``IndexError``, zipfile
+    ``NotImplementedError``, ``MemoryError``); the project's own errors pass through unchanged.
+    """
+    try:
+        yield
+    except AGNDCError:
+        raise
+    except Exception as exc:
+        raise GridFileError(f"{name}: {problem} ({_describe(exc)})") from None
+
+
 def _describe(exc: BaseException) -> str:
     """One line for a library exception: its message, or its type when it has none."""
-    text = getattr(exc, "strerror", None) or str(exc).strip()
+    # some exceptions keep (message, position) in args, which str() shows as a tuple
+    message = exc.args[0] if len(exc.args) > 1 and isinstance(exc.args[0], str) else str(exc)
+    text = (getattr(exc, "strerror", None) or message).strip()
     return (text.splitlines()[0] if text else "") or type(exc).__name__

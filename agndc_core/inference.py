@@ -120,7 +120,7 @@ def _predict_band(model, lattice: np.ndarray, radius, tile: int, report) -> torc
             torus = rows[:ops.torus]
             done += _volume(region)
         coarser = (out, torus)
-    return coarser[0]
+    return model.add_prior(coarser[0], lattice)
 
 
 def _tiles(shape, tile: int, align: int):

@@ -9,6 +9,11 @@ For each scale s the labels live on that scale's lattice (grid.py, ``scale_latti
 * ``surface`` (D,) bool     cells with at least one crossed edge among their 12 edges;
 * ``vertex``  (D, 3) float32 the dual vertex of each surface cell as an offset in [0, 1]^3 from
                             its min corner (0 elsewhere; masked from the loss by ``surface``).
+* ``quadric`` (D, 6) float32 the mean of n n^T over the cell's surface samples (xx, yy, zz,
+                            xy, yz, zx): (x - v)^T Q (x - v) is the mean squared distance of x to
+                            the tangent planes through v, the part of a vertex error that moves
+                            the surface (flat cells: along the normal only; creases: off the
+                            crease; corners: every direction). The training loss weighs by it.
 
 The vertex of a cell minimises the quadratic error of the planes of the true surface samples that
 fall inside the cell (a QEF, as in dual contouring), solved with truncated eigenvalues about the
@@ -44,6 +49,7 @@ class ScaleLabels:
     edge: np.ndarray  # (D, 3) bool
     surface: np.ndarray  # (D) bool
     vertex: np.ndarray  # (D, 3) float32 in [0, 1]
+    quadric: np.ndarray | None = None  # (D, 6) float32 mean n n^T (xx, yy, zz, xy, yz, zx)
 
 
 def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[ScaleLabels]:
@@ -72,8 +78,8 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[Scale
         surface = surface_cells(edge)
         # sampled per scale, so coarse cells get the same sample density as fine ones
         points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL)
-        vertex = cell_vertices(points, normals, surface, frame, faces)
-        labels.append(ScaleLabels(inside, edge, surface, vertex))
+        vertex, quadric = cell_vertices(points, normals, surface, frame, faces)
+        labels.append(ScaleLabels(inside, edge, surface, vertex, quadric))
     return labels
 
 
@@ -153,8 +159,12 @@ def _enumerate(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return owner, local
 
 
-def cell_vertices(points, normals, surface, frame_vertices, faces) -> np.ndarray:
-    """QEF vertex of every surface cell, as an offset from the cell's min corner.
+#: (row, column) of the 6 stored entries of a symmetric 3x3 quadric
+QUADRIC_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
+
+
+def cell_vertices(points, normals, surface, frame_vertices, faces):
+    """QEF vertex and normal quadric of every surface cell.
 
     Args:
         points, normals: (S, 3) samples in the scale's lattice frame (points at integer corners).
@@ -162,7 +172,9 @@ def cell_vertices(points, normals, surface, frame_vertices, faces) -> np.ndarray
         frame_vertices, faces: the mesh in the same frame, for cells that got no sample.
 
     Returns:
-        (D, 3) float32 offsets in [0, 1]; zero outside ``surface``.
+        vertex: (D, 3) float32 offsets in [0, 1] from each cell's min corner; quadric: (D, 6)
+        float32 mean n n^T of the cell's samples (I / 3 for a cell no sample fell into). Both
+        zero outside ``surface``.
     """
     dims = np.array(surface.shape)
     cell = np.floor(points).astype(np.int64)
@@ -182,7 +194,14 @@ def cell_vertices(points, normals, surface, frame_vertices, faces) -> np.ndarray
     offsets = np.clip(position - corners, 0.0, 1.0)
     vertex = np.zeros(surface.shape + (3,), dtype=np.float32)
     vertex.reshape(-1, 3)[surface_flat] = offsets
-    return vertex
+    count = np.bincount(slot, minlength=len(corners)).astype(np.float64)
+    entries = np.stack([np.bincount(slot, normals[:, r] * normals[:, c], len(corners))
+                        for r, c in QUADRIC_ENTRIES], axis=1)
+    entries = np.where(count[:, None] > 0, entries / np.maximum(count, 1)[:, None],
+                       np.array([1, 1, 1, 0, 0, 0]) / 3.0)
+    quadric = np.zeros(surface.shape + (6,), dtype=np.float32)
+    quadric.reshape(-1, 6)[surface_flat] = entries
+    return vertex, quadric
 
 
 def _solve_qef(slot, points, normals, corners) -> np.ndarray:

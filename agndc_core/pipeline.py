@@ -5,14 +5,24 @@
 Methods:
     "agndc"  the AGNDC cascade with the shipped (or a given) checkpoint;
     "undc"   the single-scale plain-convolution baseline checkpoint (paper Table 4, first row);
+    "surfacenets" surface nets (surfacenets.py): each dual vertex at the mean of its cell's
+             crossed-edge midpoints, contoured like the networks' vertices; no weights;
     "mc"     marching cubes of the same grid (scikit-image);
+    "mc_taubin" marching cubes followed by Taubin smoothing (trimesh, ``TAUBIN_ITERATIONS``
+             steps, default lambda/nu), smoothed in lattice coordinates;
     "oracle" dual contouring of ground-truth labels: needs the source mesh (``remesh_mesh``);
              the ceiling any network can reach with this contouring.
 
 Topology: with binary input the crossed edges of the finest lattice are exactly the edges whose
-end points differ, so by default ("input") the networks supply the vertex positions and the input
-supplies the edges; this keeps every output watertight. ``topology="predicted"`` uses the
-network's own edge head (UNDC's behaviour), which may open holes or add sheets.
+end points differ, so the networks supply the vertex positions and the input supplies the edges
+(and, through ``contour.dual_contour``, the split of ambiguous cells into patches); every output
+is a closed 2-manifold. UNDC's alternative, the network's own edge head, is not offered: the
+finest edge head is not trained (there is nothing to learn where the input gives the edges) and
+it could only open holes or add sheets.
+
+Orientation: faces are wound outward in world coordinates. An affine that mirrors space
+(det < 0, common in NIfTI) turns index-space outward faces inward, so ``remesh`` reverses the
+winding once, after the world mapping, for every method.
 """
 
 from __future__ import annotations
@@ -29,10 +39,12 @@ from .errors import AGNDCError, CancelledError, MeshError
 from .grid import LATTICE_PAD, VoxelGrid, pad_to_lattice
 from .labels import crossed_edges
 
-METHODS = ("agndc", "undc", "mc", "oracle")
-TOPOLOGIES = ("input", "predicted")
+METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle")
 #: default checkpoint name per learned method (agndc_core/weights/<name>.safetensors)
 CHECKPOINT_NAMES = {"agndc": "agndc", "undc": "undc"}
+#: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
+#: inflate by nu, so 10 is 5 of each)
+TAUBIN_ITERATIONS = 10
 
 
 @dataclass
@@ -76,7 +88,7 @@ class _Stages:
 
 
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
-           topology: str = "input", min_component_faces: int = 0, device: str = "cpu",
+           min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
@@ -85,7 +97,6 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         method: one of METHODS. "oracle" needs ``labels`` (use ``remesh_mesh``).
         checkpoint: path of a .safetensors checkpoint (learned methods); default: shipped weights.
         threads: torch CPU threads (default: torch's choice).
-        topology: "input" or "predicted" (module docstring).
         min_component_faces: drop connected components smaller than this.
         tile: lattice tile size for large grids (learned methods); None = automatic.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
@@ -95,27 +106,64 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         grid = VoxelGrid(grid)
     if method not in METHODS:
         raise AGNDCError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if topology not in TOPOLOGIES:
-        raise AGNDCError(f"unknown topology {topology!r}; choose one of {', '.join(TOPOLOGIES)}")
     grid.check_not_trivial()
     stages = _Stages(progress, cancel)
-    if method == "mc":
+    if method in ("mc", "mc_taubin"):
         from .mc import marching_cubes_lattice
 
         lattice = pad_to_lattice(grid.occupancy, levels=0)
         vertices, faces = stages.run("marching cubes", 0.1, marching_cubes_lattice, lattice)
+        if method == "mc_taubin":
+            vertices = stages.run("taubin smoothing", 0.6, taubin_smooth, vertices, faces)
     else:
         lattice = pad_to_lattice(grid.occupancy)
-        vertex, edge = stages.run("predict", 0.05, _predict, method, lattice, labels, checkpoint,
-                                  threads, device, tile, progress, cancel)
-        if topology == "input" or edge is None:
-            edge = crossed_edges(lattice)
+        if method == "surfacenets":
+            from .surfacenets import surface_nets_lattice
+
+            vertex = stages.run("surface nets", 0.05, surface_nets_lattice, lattice)
+        else:
+            vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
+                                checkpoint, threads, device, tile, progress, cancel)
+        edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
     world = grid.index_to_world(vertices - LATTICE_PAD)
+    faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
         progress(1.0, "done")
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
+
+
+def orient_to_affine(faces_fx3: np.ndarray, affine: np.ndarray) -> np.ndarray:
+    """Faces wound outward in index space -> wound outward after ``affine``.
+
+    A mirroring affine (det of its linear part < 0) reverses every triangle's orientation, so
+    the winding is reversed to compensate; otherwise the faces are returned unchanged.
+
+    Args:
+        faces_fx3: (F, 3) int64 faces; affine: (4, 4) float64 index -> world map.
+    """
+    if np.linalg.det(np.asarray(affine, dtype=np.float64)[:3, :3]) < 0:
+        return np.ascontiguousarray(faces_fx3[:, ::-1])
+    return faces_fx3
+
+
+def taubin_smooth(vertices_vx3: np.ndarray, faces_fx3: np.ndarray, *,
+                  iterations: int = TAUBIN_ITERATIONS) -> np.ndarray:
+    """Taubin (lambda|mu) smoothing of a mesh: (V, 3) float64 -> (V, 3) float64, same faces.
+
+    trimesh's ``filter_taubin`` with its default lambda = nu = 0.5; it shrinks far less than
+    plain Laplacian smoothing. Faces and vertex order are kept, so the topology is unchanged.
+    """
+    import trimesh
+    from trimesh.smoothing import filter_taubin
+
+    if len(faces_fx3) == 0:
+        return vertices_vx3
+    # process=False: keep marching cubes' vertex order (faces index it unchanged)
+    mesh = trimesh.Trimesh(vertices_vx3.copy(), faces_fx3, process=False)
+    filter_taubin(mesh, iterations=iterations)
+    return np.asarray(mesh.vertices, dtype=np.float64)
 
 
 def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
@@ -141,14 +189,14 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
 
 
 def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel):
-    """(vertex (D, 3), edge (D, 3) bool or None) for a learned method or the oracle."""
+    """(D, 3) vertex offsets of a learned method or the oracle (labels' vertices)."""
     if method == "oracle":
         if labels is None:
             raise AGNDCError("the oracle contours ground-truth labels: call remesh_mesh with the "
                              "source mesh, not remesh with a grid alone")
         if labels[0].inside.shape != lattice.shape:
             raise MeshError("oracle labels do not match the grid's lattice")
-        return labels[0].vertex, labels[0].edge
+        return labels[0].vertex
     import torch
 
     from .inference import predict_lattice
@@ -156,9 +204,9 @@ def _predict(method, lattice, labels, checkpoint, threads, device, tile, progres
     if threads:
         torch.set_num_threads(int(threads))
     model = load_model(checkpoint or _default_checkpoint(method))
-    vertex, edge_prob = predict_lattice(model, lattice, device=device, tile=tile,
-                                        progress=progress, cancel=cancel)
-    return vertex, edge_prob > 0.5
+    vertex, _ = predict_lattice(model, lattice, device=device, tile=tile, progress=progress,
+                                cancel=cancel)
+    return vertex
 
 
 def _default_checkpoint(method: str) -> Path:

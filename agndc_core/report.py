@@ -20,15 +20,22 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import (METRIC_COLUMNS, evaluate_meshes, markdown_table, parse_methods,
-                       require_meshes, summarize_rows, write_report)
-from .pipeline import CHECKPOINT_NAMES
+from .evaluate import (METRIC_COLUMNS, evaluate_meshes, headroom_line, markdown_table,
+                       parse_methods, require_meshes, summarize_rows, write_report)
+from .pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 
-REPORT_METHODS = ("mc", "undc", "agndc", "oracle")
+REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle")
 CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
-#: one shape per category for the picture (names are file stems of the dev set)
-FIGURE_SHAPES = ("fandisk", "bunny_oded", "1004825")
-FIGURE_COLUMNS = ("input voxels", "marching cubes", "AGNDC", "ground truth")
+#: shapes of the picture: file stems of the evaluated folder, or ``ROTATED_BOX`` (built here)
+FIGURE_SHAPES = ("fandisk", "rotated_box", "bunny_oded")
+#: (column title, method); "ground truth" is the source mesh itself
+FIGURE_COLUMNS = (("marching cubes", "mc"), ("surface nets", "surfacenets"), ("AGNDC", "agndc"),
+                  ("ground truth", None))
+#: the synthetic figure shape: a box turned off the grid axes, so its flat faces and sharp edges
+#: cross voxels at every angle (marching cubes and surface nets staircase it)
+ROTATED_BOX = "rotated_box"
+ROTATED_BOX_EXTENTS = (1.0, 0.7, 0.5)
+ROTATED_BOX_DEGREES = ((20.0, (1.0, 0.0, 0.0)), (35.0, (0.0, 1.0, 0.0)))
 
 
 def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
@@ -57,13 +64,13 @@ def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
     figure = out_md.parent / f"{out_md.stem}_shapes.png"
     pictured = render_figure(meshes, figure_shapes, figure, resolution=resolutions[0])
     text = _markdown(rows, resolutions, methods, figure if pictured else None, rows_dir, command,
-                     n_samples, ablation_rows)
+                     n_samples, ablation_rows, rotated_box_shown=ROTATED_BOX in figure_shapes)
     out_md.write_text(text)
     return out_md
 
 
 def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
-              ablation_rows) -> str:
+              ablation_rows, *, rotated_box_shown=False) -> str:
     lines = ["# AGNDC results on the dev meshes", ""]
     lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
               f"{platform.machine()} with {os.cpu_count()} CPU cores, torch "
@@ -73,6 +80,9 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               f"{n_samples:,} samples per surface, the ground truth's normalised frame) compare the result "
               "with the original mesh. Means over shapes; ECD/EF1 skip shapes without sharp "
               "edges. `oracle` contours ground-truth labels: the ceiling of this contouring. "
+              "`surfacenets` (the mean of each cell's crossed-edge midpoints) and `mc_taubin` "
+              f"(marching cubes + trimesh Taubin smoothing, {TAUBIN_ITERATIONS} iterations) "
+              "need no weights. "
               "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring; "
               f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
     lines += ["## Models", "", _models_table(methods), ""]
@@ -80,6 +90,8 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
         mine = [r for r in rows if r["resolution"] == resolution]
         summaries = summarize_rows(mine)
         lines += [f"## {resolution}³: all shapes", "", markdown_table(summaries), ""]
+        headroom = headroom_line(summaries)
+        lines += [headroom, ""] if headroom else []
         lines += _comparison(summaries)
         for category in _categories(mine):
             part = [r for r in mine if r["category"] == category]
@@ -96,8 +108,14 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
         lines += ["## Failures", ""] + [f"- {r['name']} {r['method']} {r['resolution']}³: "
                                         f"{r['error']}" for r in errors] + [""]
     if figure is not None:
-        lines += ["## Picture", "", f"![{', '.join(FIGURE_COLUMNS)}]({figure.name})", "",
-                  f"Columns: {', '.join(FIGURE_COLUMNS)} at {resolutions[0]}³.", ""]
+        titles = ", ".join(title for title, _ in FIGURE_COLUMNS)
+        caption = f"Columns: {titles} at {resolutions[0]}³, edges drawn over the shading."
+        if rotated_box_shown:
+            turns = " and ".join(f"{a:g}° about {'xyz'[int(np.argmax(v))]}"
+                                 for a, v in ROTATED_BOX_DEGREES)
+            caption += (f" The rotated box is a {' × '.join(str(e) for e in ROTATED_BOX_EXTENTS)}"
+                        f" box turned {turns}.")
+        lines += ["## Picture", "", f"![{titles}]({figure.name})", "", caption, ""]
     lines += [f"Every row: `{rows_dir.name}/rows.csv` (raw metrics, faces, seconds, errors).", ""]
     return "\n".join(lines)
 
@@ -109,7 +127,7 @@ def _comparison(summaries) -> list[str]:
         return []
     lower_is_better = {"cd", "ecd"}
     out = []
-    for base in ("mc", "undc"):
+    for base in ("mc", "surfacenets", "undc"):
         if base not in by_method:
             continue
         parts = []
@@ -237,35 +255,64 @@ def _torch_version() -> str:
 # -- picture ----------------------------------------------------------------------------------
 
 def render_figure(meshes, names, path, *, resolution=64) -> bool:
-    """A grid of renders: one row per named shape, columns ``FIGURE_COLUMNS``. False if none."""
+    """A grid of renders: one row per named shape, columns ``FIGURE_COLUMNS``. False if none.
+
+    ``names`` are file stems of ``meshes`` or ``ROTATED_BOX``; names found nowhere are skipped.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .gridio import load_mesh
     from .pipeline import remesh_mesh
 
-    chosen = [(p, k) for name in names for p, k in meshes if Path(p).stem == name]
+    chosen = _figure_shapes(meshes, names)
     if not chosen:
         return False
-    fig = plt.figure(figsize=(3.6 * len(FIGURE_COLUMNS), 3.6 * len(chosen)), dpi=110)
-    for row, (mesh_path, category) in enumerate(chosen):
-        vertices, faces = load_mesh(mesh_path)
-        mc = remesh_mesh(vertices, faces, resolution=resolution, method="mc")
-        agndc = remesh_mesh(vertices, faces, resolution=resolution, method="agndc")
-        panels = [voxel_faces(mc.grid), (mc.vertices, mc.faces), (agndc.vertices, agndc.faces),
-                  (vertices, faces)]
-        for col, (pv, pf) in enumerate(panels):
-            ax = fig.add_subplot(len(chosen), len(FIGURE_COLUMNS),
-                                 row * len(FIGURE_COLUMNS) + col + 1, projection="3d")
+    n_cols = len(FIGURE_COLUMNS)
+    fig = plt.figure(figsize=(3.6 * n_cols, 3.6 * len(chosen)), dpi=110)
+    for row, (name, category, vertices, faces) in enumerate(chosen):
+        for col, (title, method) in enumerate(FIGURE_COLUMNS):
+            if method is None:
+                pv, pf = vertices, faces
+            else:
+                result = remesh_mesh(vertices, faces, resolution=resolution, method=method,
+                                     source=name)
+                pv, pf = result.vertices, result.faces
+            ax = fig.add_subplot(len(chosen), n_cols, row * n_cols + col + 1, projection="3d")
             _draw(ax, np.asarray(pv, float), np.asarray(pf), vertices)
-            title = FIGURE_COLUMNS[col] if row == 0 else ""
-            ax.set_title(f"{title}\n{Path(mesh_path).stem} ({category})" if col == 0 else title)
+            title = title if row == 0 else ""
+            ax.set_title(f"{title}\n{name} ({category})" if col == 0 else title)
     fig.subplots_adjust(left=0, right=1, bottom=0, top=0.95, wspace=0, hspace=0.05)
     fig.savefig(path)
     plt.close(fig)
     return True
+
+
+def _figure_shapes(meshes, names) -> list[tuple]:
+    """(name, category, (V, 3) float vertices, (F, 3) int faces) for each name that exists."""
+    from .gridio import load_mesh
+
+    chosen = []
+    for name in names:
+        if name == ROTATED_BOX:
+            chosen.append((name, "synthetic", *rotated_box()))
+            continue
+        for mesh_path, category in meshes:
+            if Path(mesh_path).stem == name:
+                chosen.append((name, category, *load_mesh(mesh_path)))
+                break
+    return chosen
+
+
+def rotated_box():
+    """The figure's ``ROTATED_BOX``: (8, 3) float64 vertices, (12, 3) int64 faces, outward."""
+    import trimesh
+
+    mesh = trimesh.creation.box(ROTATED_BOX_EXTENTS)
+    for degrees, axis in ROTATED_BOX_DEGREES:
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(degrees), axis))
+    return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
 
 
 def voxel_faces(grid):
@@ -292,7 +339,8 @@ def voxel_faces(grid):
 
 
 def _draw(ax, vertices, faces, reference):
-    """Flat-shaded triangles, head-light style, framed on the reference mesh's bounds."""
+    """Flat-shaded triangles with their edges drawn thin (the wireframe shows the tessellation),
+    head-light style, framed on the reference mesh's bounds."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     tri = vertices[faces]
@@ -301,7 +349,10 @@ def _draw(ax, vertices, faces, reference):
     light = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
     shade = 0.25 + 0.75 * np.abs(normal @ light)  # two-sided: orientation does not matter here
     colors = np.clip(shade[:, None] * np.array([0.75, 0.8, 0.9]), 0, 1)
-    ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors="none"))
+    # thinner lines for denser meshes, so a 64³ reconstruction is not drowned in black
+    width = float(np.clip(12.0 / np.sqrt(max(len(faces), 1)), 0.04, 0.6))
+    ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors=(0.1, 0.1, 0.2, 0.4),
+                                         linewidths=width))
     lo, hi = reference.min(0), reference.max(0)
     centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42  # < 1/2: the bounding box corners stay empty
     for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):

@@ -1,16 +1,34 @@
-"""Seeded procedural CAD-like solids for training data (manifold3d booleans).
+"""Seeded procedural solids for training data: CAD parts, smooth primitives, organic blobs and
+free-form, thin-walled or finely detailed parts (manifold3d booleans, skimage marching cubes).
 
-A shape is one to three *parts*. A part is a base body (box, cylinder/frustum, extruded
-polygon or wedge, chamfered block, shelled box or tube) with a few added features (bosses,
-ribs, cones) and subtracted ones (through-holes, blind pockets, slots, countersinks, angled
-holes). The whole shape then gets a random non-uniform scale and a rotation: a random 3-D
-rotation for most seeds, a signed axis permutation for ``AXIS_ALIGNED_FRACTION`` of them, so
-the set holds both grid-aligned and off-grid creases. The output is normalised (bounding-box
-centre at the origin, longest side 1), the frame the metrics and the voxeliser use.
+Every seed belongs to one *family* (``shape_family``), drawn with ``FAMILY_WEIGHTS``:
 
-Everything is drawn from ``np.random.default_rng((seed, attempt))``, so a seed always gives
-the same arrays; an attempt whose booleans leave nothing usable is retried with the next
-``attempt`` (a derived seed). manifold3d guarantees a watertight, oriented 2-manifold result.
+- ``cad``: one to three parts lined up with gaps. A part is a base body (box, cylinder/frustum,
+  extruded polygon or wedge, block with chamfers and fillets of many sizes, rounded box, solid
+  of revolution such as a vase, knob or grooved stepped shaft, extruded random profile with
+  rounded corners, shelled box or tube) with added features (bosses, ribs, cones) and
+  subtracted ones (through-holes, blind pockets, rounded pockets, slots, countersinks, angled
+  holes).
+- ``smooth``: unions of spheres, ellipsoids, capsules and tori, sometimes with a box or a
+  cylinder, then sometimes minus a few more primitives or intersected with one.
+- ``organic``: the iso-surface of a sum of random Gaussian blobs (metaballs, some negative,
+  sometimes with smooth noise), extracted by marching cubes on a fine grid and Taubin-smoothed;
+  sometimes cut flat or drilled.
+- ``freeform``: a block under a smooth random height field, a CAD part bent by a smooth space
+  warp, a thin-walled part (vessel, finned plate, partitioned tray, bowl), or a body with
+  engraved and embossed details 1-3 voxels across at 64^3.
+
+The whole shape then gets a random non-uniform scale and a rotation: a signed axis permutation
+for ``AXIS_ALIGNED_FRACTION`` of the seeds (``is_axis_aligned``), a uniform random rotation for
+the others, so the set holds both grid-aligned and off-grid creases. The output is normalised
+(bounding-box centre at the origin, longest side 1), the frame the metrics and the voxeliser use.
+
+The family and the alignment come from the stream ``default_rng((seed, SEED_STREAM))``, so they
+are known without building the shape; everything else is drawn from
+``np.random.default_rng((seed, attempt))``. A seed always gives the same arrays; an attempt whose
+booleans leave nothing usable is retried with the next ``attempt`` (same family). manifold3d
+guarantees a watertight, oriented 2-manifold result (marching-cubes meshes go through its mesh
+constructor, which rejects anything else).
 
 Sizes below are in the nominal units of a part before normalisation (a part is ~1 across).
 """
@@ -18,14 +36,25 @@ Sizes below are in the nominal units of a part before normalisation (a part is ~
 from __future__ import annotations
 
 import numpy as np
-from manifold3d import CrossSection, Manifold, OpType
+from manifold3d import CrossSection, JoinType, Manifold, Mesh64, OpType
+from scipy import sparse
+from skimage.measure import marching_cubes
 
+#: shape families and their shares of the seeds
+FAMILIES = ("cad", "smooth", "organic", "freeform")
+FAMILY_WEIGHTS = (0.45, 0.20, 0.20, 0.15)
+#: second entropy word of the per-seed stream (family, alignment); attempts use 0..MAX_ATTEMPTS-1
+SEED_STREAM = 7919
 #: range of circle segments: enough that a hole looks round at 64^3 (a 64-gon deviates from
 #: its circle by 0.1 % of the radius), few enough to keep meshes small
 SEGMENTS = (24, 64)
-#: share of shapes left on the grid axes (signed axis permutation instead of a free rotation)
-AXIS_ALIGNED_FRACTION = 0.2
-#: share of shapes made of several disjoint parts
+#: at least this many segments for round bodies whose whole surface is curved (spheres, tori,
+#: vases): a 48-gon deviates by 0.2 % of the radius, under a voxel at 128^3
+SMOOTH_SEGMENTS = 48
+#: share of shapes left on the grid axes (signed axis permutation instead of a free rotation);
+#: the training recipes add no second rotation, so this is the aligned share of the data
+AXIS_ALIGNED_FRACTION = 0.35
+#: share of CAD shapes made of several disjoint parts
 MULTI_PART_FRACTION = 0.25
 #: per-axis factor range of the global non-uniform scale
 STRETCH = (0.6, 1.4)
@@ -34,11 +63,88 @@ BODY_SIZE = (0.35, 1.0)
 #: wall thickness of shelled bodies as a fraction of the body's smallest side (>= ~2 voxels
 #: at 64^3 for typical bodies, so the walls survive voxelisation)
 WALL_FRACTION = (0.12, 0.25)
+#: fillet radius or chamfer leg as a fraction of the smaller side next to the edge (from about
+#: a voxel at 64^3 to nearly half the side)
+FILLET_FRACTION = (0.03, 0.45)
+#: fine details (grooves, bosses) and thin walls are sized in voxels at this resolution,
+#: relative to the longest side of their body
+DETAIL_RESOLUTION = 64
+DETAIL_VOXELS = (1.0, 3.0)
+THIN_VOXELS = (1.5, 3.5)
+#: points of a revolved or vessel profile curve
+PROFILE_POINTS = 48
+#: marching-cubes cells along the longest side of an organic blob's box
+BLOB_GRID = 64
+#: Taubin smoothing of blob meshes: lambda, mu (|mu| > lambda: no shrinkage), iterations
+TAUBIN = (0.5, -0.53, 4)
+#: simplification tolerance of blob meshes, nominal units (a voxel at 128^3 is ~8e-3)
+BLOB_SIMPLIFY = 1e-3
+#: edge length of warped bodies, as a fraction of their longest side
+WARP_EDGE = 1 / 32
 #: connected components smaller than this share of the total volume are dropped (booleans
 #: can leave slivers that are sub-voxel after normalisation)
 MIN_COMPONENT_SHARE = 0.02
 #: attempts (derived seeds) before falling back to a plain box
 MAX_ATTEMPTS = 16
+
+
+# ---------------------------------------------------------------- seed-level draws
+
+
+def _seed_draws(seed: int) -> tuple[str, bool]:
+    """The family and the axis alignment of ``seed`` (shared by all its attempts)."""
+    u_family, u_aligned = np.random.default_rng((seed, SEED_STREAM)).random(2)
+    index = np.searchsorted(np.cumsum(FAMILY_WEIGHTS), u_family, side="right")
+    return FAMILIES[min(int(index), len(FAMILIES) - 1)], bool(u_aligned < AXIS_ALIGNED_FRACTION)
+
+
+def shape_family(seed: int) -> str:
+    """The family (one of ``FAMILIES``) that ``generate_shape(seed)`` draws from; cheap."""
+    return _seed_draws(seed)[0]
+
+
+def is_axis_aligned(seed: int) -> bool:
+    """Whether ``generate_shape(seed)`` keeps its part axes on the grid axes; cheap."""
+    return _seed_draws(seed)[1]
+
+
+def cad_part(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``generate_shape`` of the first CAD-family seed at or after ``seed``: the demo's, the
+    benchmarks' and the Blender tests' machined part, whatever family ``seed`` itself draws."""
+    while shape_family(seed) != "cad":
+        seed += 1
+    return generate_shape(seed)
+
+
+# ---------------------------------------------------------------- 2-D helpers
+
+
+def _rounded_rect(w: float, h: float, r: float, segs: int) -> CrossSection:
+    """Centred ``w`` x ``h`` rectangle with corners rounded to radius ``r`` < min(w, h) / 2."""
+    core = CrossSection.square((w - 2 * r, h - 2 * r), center=True)
+    return core.offset(r, JoinType.Round, 2.0, segs)
+
+
+def _slab(section: CrossSection, h: float) -> Manifold:
+    """``section`` extruded along z over [-h/2, h/2]."""
+    return section.extrude(h).translate((0, 0, -h / 2))
+
+
+def _smooth_curve(rng, t: np.ndarray, lo: float) -> np.ndarray:
+    """(n,) smooth random curve over ``t`` in [0, 1] (1-3 low-frequency waves), range [lo, 1]."""
+    k = rng.integers(1, 4)
+    freq, phase = rng.uniform(0.3, 1.6, (k, 1)), rng.uniform(0, 2 * np.pi, (k, 1))
+    amp = rng.uniform(0.3, 1.0, (k, 1))
+    wave = (amp * np.sin(2 * np.pi * freq * t + phase)).sum(axis=0) + rng.uniform(-1, 1) * t
+    wave = (wave - wave.min()) / max(np.ptp(wave), 1e-9)
+    return lo + (1 - lo) * wave
+
+
+def _revolve(profile: np.ndarray, segs: int) -> Manifold:
+    """Revolve the (n, 2) (radius, z) polyline, closed along the z axis, about z."""
+    ends = np.array([[0.0, profile[0, 1]], [0.0, profile[-1, 1]]])
+    poly = np.vstack([ends[:1], profile, ends[1:]])
+    return CrossSection([poly]).revolve(segs)
 
 
 # ---------------------------------------------------------------- base bodies
@@ -76,24 +182,106 @@ def _prism(rng, segs) -> Manifold:
     return _centre(body)
 
 
-def _chamfered_block(rng, segs) -> Manifold:
-    """Box with 45-degree chamfers on a random subset of its 12 edges."""
+def _edge_cutter(rng, segs, size: np.ndarray, axis: int) -> Manifold:
+    """Tool that chamfers (legs c) or fillets (radius c) one edge along ``axis`` of the centred
+    box ``size``. Built for an edge along z through the origin with the box in x, y < 0."""
+    other = [i for i in range(3) if i != axis]
+    c = rng.uniform(*FILLET_FRACTION) * size[other].min()
+    e = 0.1 * c  # overshoot past the faces so the cut is clean
+    if rng.random() < 0.5:  # chamfer: beyond the line x + y = -c
+        section = CrossSection([np.array([[e, -c - e], [e, e], [-c - e, e]])])
+    else:  # fillet: corner square minus the circle that touches both faces
+        section = (CrossSection.square((c + e, c + e)).translate((-c, -c))
+                   - CrossSection.circle(c, segs).translate((-c, -c)))
+    length = 1.5 * size[axis]
+    tool = section.extrude(length).translate((0, 0, -length / 2))
+    signs = rng.choice([-1.0, 1.0], 2)
+    affine = np.zeros((3, 4))
+    affine[other[0], 0], affine[other[1], 1], affine[axis, 2] = signs[0], signs[1], 1.0
+    if np.linalg.det(affine[:, :3]) < 0:
+        affine[axis, 2] = -1.0  # the tool is symmetric in z: keep a proper rotation
+    affine[other, 3] = signs * size[other] / 2
+    return tool.transform(affine)
+
+
+def _edged_block(rng, segs) -> Manifold:
+    """Box with chamfers and fillets of random sizes on a random subset of its 12 edges."""
     size = rng.uniform(*BODY_SIZE, 3)
-    body = Manifold.cube(size, center=True)
-    cutters = []
-    for _ in range(rng.integers(2, 7)):
-        axis = rng.integers(3)
-        other = [i for i in range(3) if i != axis]
-        c = rng.uniform(0.1, 0.3) * size[other].min()
-        # a square bar rotated 45 degrees about the edge removes a right triangle of legs c
-        bar = np.full(3, c * np.sqrt(2))
-        bar[axis] = size[axis] * 1.5
-        rot = np.zeros(3)
-        rot[axis] = 45.0
-        pos = np.zeros(3)
-        pos[other] = rng.choice([-0.5, 0.5], 2) * size[other]
-        cutters.append(Manifold.cube(bar, center=True).rotate(rot).translate(pos))
-    return body - Manifold.batch_boolean(cutters, OpType.Add)
+    cutters = [_edge_cutter(rng, segs, size, rng.integers(3)) for _ in range(rng.integers(2, 9))]
+    return Manifold.cube(size, center=True) - Manifold.batch_boolean(cutters, OpType.Add)
+
+
+def _rounded_box(rng, segs) -> Manifold:
+    """Box filleted on its 4 edges along z, on 8 edges (two crossed rounded bars intersected),
+    or on all 12 (hull of 8 corner balls)."""
+    size = rng.uniform(*BODY_SIZE, 3)
+    r = rng.uniform(*FILLET_FRACTION) * size.min()
+    kind = rng.integers(3)
+    if kind == 2:
+        corners = (np.indices((2, 2, 2)).reshape(3, -1).T * 2 - 1) * (size / 2 - r)  # (8, 3)
+        ball = Manifold.sphere(r, max(segs, SMOOTH_SEGMENTS))
+        return Manifold.batch_hull([ball.translate(tuple(c)) for c in corners])
+    bar = _slab(_rounded_rect(size[0], size[1], r, segs), size[2])
+    if kind == 0:
+        return bar
+    r2 = rng.uniform(*FILLET_FRACTION) * min(size[1], size[2])
+    cross = _slab(_rounded_rect(size[2], size[1], r2, segs), size[0])
+    return bar ^ cross.rotate((0, 90, 0))  # the second bar runs along x
+
+
+def _revolved(rng, segs) -> Manifold:
+    """Solid of revolution about z: a vase or knob (smooth random radius curve, maybe closing
+    in a dome) or a stepped shaft with rectangular and V grooves."""
+    h, r_max = rng.uniform(*BODY_SIZE), rng.uniform(0.15, 0.5)
+    if rng.random() < 0.5:
+        t = np.linspace(0.0, 1.0, PROFILE_POINTS)
+        radius = r_max * _smooth_curve(rng, t, lo=0.25)
+        if rng.random() < 0.4:  # knob: a rounded dome on top
+            radius = radius * np.sqrt(1 - t ** rng.uniform(4, 12))
+        return _centre(_revolve(np.column_stack([radius, t * h]), max(segs, SMOOTH_SEGMENTS)))
+    n = rng.integers(2, 6)
+    z = np.concatenate([[0.0], np.sort(rng.uniform(0.1, 0.9, n - 1)), [1.0]]) * h  # (n + 1,)
+    radius = rng.uniform(0.35, 1.0, n) * r_max
+    body = _revolve(np.column_stack([np.repeat(radius, 2), np.repeat(z, 2)[1:-1]]), segs)
+    unit = max(h, 2 * r_max) / DETAIL_RESOLUTION
+    grooves = []
+    for _ in range(rng.integers(0, 4)):
+        zg = rng.uniform(0.05, 0.95) * h
+        rg = radius[min(np.searchsorted(z, zg) - 1, n - 1)]
+        depth = min(unit * rng.uniform(1, 4), 0.5 * rg)
+        width = unit * rng.uniform(1, 4)
+        if rng.random() < 0.5:  # rectangular groove
+            ring = np.array([[rg - depth, zg], [rg + unit, zg], [rg + unit, zg + width],
+                             [rg - depth, zg + width]])
+        else:  # V groove
+            ring = np.array([[rg - depth, zg + width / 2], [rg + unit, zg - width / 2],
+                             [rg + unit, zg + 1.5 * width]])
+        grooves.append(CrossSection([ring]).revolve(segs))
+    if grooves:
+        body = Manifold.batch_boolean([body, *grooves], OpType.Subtract)
+    return _centre(body)
+
+
+def _profile_extrusion(rng, segs) -> Manifold:
+    """Random star-shaped polygon with rounded corners and maybe round holes, extruded
+    straight, tapered or twisted."""
+    a, n = rng.uniform(*BODY_SIZE), rng.integers(4, 12)
+    # jittered angles keep every gap below pi: a simple, counter-clockwise polygon
+    ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
+    rad = 0.5 * a * rng.uniform(0.35, 1.0, n)
+    section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
+    r = rng.uniform(*FILLET_FRACTION) * 0.3 * a
+    if rng.random() < 0.7:  # round the convex corners
+        section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
+    if rng.random() < 0.5:  # round the concave corners
+        section = section.offset(r, JoinType.Round, 2.0, segs).offset(-r, JoinType.Round, 2.0, segs)
+    for _ in range(rng.integers(0, 3)):
+        hole = CrossSection.circle(rng.uniform(0.04, 0.12) * a, segs)
+        section = section - hole.translate(tuple(rng.uniform(-0.15, 0.15, 2) * a))
+    h = rng.uniform(*BODY_SIZE)
+    twist = rng.uniform(-120, 120) if rng.random() < 0.3 else 0.0
+    top = tuple(rng.uniform(0.5, 1.0, 2)) if rng.random() < 0.3 else (1.0, 1.0)
+    return _centre(section.extrude(h, 24 if twist else 0, twist, top))
 
 
 def _shell(rng, segs) -> Manifold:
@@ -108,7 +296,13 @@ def _shell(rng, segs) -> Manifold:
     return Manifold.cube(size, center=True) - cavity
 
 
-BODIES = (_box, _cylinder, _prism, _chamfered_block, _shell)
+BODIES = (_box, _cylinder, _prism, _edged_block, _shell, _rounded_box, _revolved,
+          _profile_extrusion)
+
+
+def _placed(rng, m: Manifold, spread: float) -> Manifold:
+    """``m`` moved by a random offset in [-spread, spread]^3."""
+    return m.translate(tuple(rng.uniform(-spread, spread, 3)))
 
 
 def _centre(m: Manifold) -> Manifold:
@@ -126,12 +320,13 @@ def _bounds(m: Manifold) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------- features
 
 
-def _face_frame(rng, lo, hi):
-    """A random face of the box [lo, hi]: its axis, outward sign (+-1) and a point on it.
+def _face_frame(rng, lo, hi, axes=(0, 1, 2)):
+    """A random face (normal along one of ``axes``) of the box [lo, hi]: its axis, outward
+    sign (+-1) and a point on it.
 
     The point stays in the middle 60 % of the face so features land on material even for
     round or slanted bodies whose bounding box is larger than the solid."""
-    axis, sign = rng.integers(3), rng.choice([-1.0, 1.0])
+    axis, sign = axes[rng.integers(len(axes))], rng.choice([-1.0, 1.0])
     mid, half = (lo + hi) / 2, (hi - lo) / 2
     point = mid + rng.uniform(-0.3, 0.3, 3) * half
     point[axis] = mid[axis] + sign * half[axis]
@@ -148,8 +343,9 @@ def _along(m: Manifold, axis: int, sign: float) -> Manifold:
 
 
 def _profile_tool(rng, segs, width: float, depth: float) -> Manifold:
-    """z-aligned tool with base at z=0: round hole, square pocket, slot or countersink."""
-    kind = rng.integers(4)
+    """z-aligned tool with base at z=0: round hole, square or rounded pocket, slot or
+    countersink."""
+    kind = rng.integers(5)
     r = width / 2
     if kind == 0:
         return Manifold.cylinder(depth, r, r, segs)
@@ -159,6 +355,10 @@ def _profile_tool(rng, segs, width: float, depth: float) -> Manifold:
         d = width * rng.uniform(1.0, 2.5)
         pin = Manifold.cylinder(depth, r * 0.6, r * 0.6, segs)
         return Manifold.batch_hull([pin.translate((-d / 2, 0, 0)), pin.translate((d / 2, 0, 0))])
+    if kind == 3:  # rounded rectangular pocket, corner radius from sharp-ish to a full round
+        length = width * rng.uniform(0.6, 2.0)
+        corner = rng.uniform(0.05, 0.49) * min(width, length)
+        return _rounded_rect(width, length, corner, segs).extrude(depth)
     return Manifold.cylinder(depth, r, r * rng.uniform(0.0, 0.5), segs)  # cone: countersink
 
 
@@ -199,7 +399,38 @@ def _adder(rng, segs, lo, hi) -> Manifold:
     return _along(tool, axis, sign).translate(tuple(point))
 
 
-# ---------------------------------------------------------------- assembly
+def _detail_tool(rng, segs, lo, hi, axes) -> tuple[Manifold, bool]:
+    """A fine feature on a face of the box [lo, hi], 1-3 voxels deep/high and wide at
+    ``DETAIL_RESOLUTION``: a line, ring, dot or row of parallel lines. Returns the tool and
+    whether it is engraved (subtracted) rather than embossed (added)."""
+    axis, sign, point = _face_frame(rng, lo, hi, axes)
+    unit = (hi - lo).max() / DETAIL_RESOLUTION
+    face = np.delete(hi - lo, axis).min()
+    depth, width = unit * rng.uniform(*DETAIL_VOXELS, 2)
+    height = depth + unit  # one voxel of overshoot (engraving) or of sinking (embossing)
+    kind = rng.integers(4)
+    if kind == 0:  # line
+        length = face * rng.uniform(0.2, 0.7)
+        tool = Manifold.cube((length, width, height)).translate((-length / 2, -width / 2, 0))
+    elif kind == 1:  # ring
+        r = max(face * rng.uniform(0.06, 0.25), 2 * width)
+        bore = Manifold.cylinder(3 * height, r - width, r - width, segs)
+        tool = Manifold.cylinder(height, r, r, segs) - bore.translate((0, 0, -height))
+    elif kind == 2:  # dot: dimple or boss
+        r = unit * rng.uniform(1.0, 4.0)
+        tool = Manifold.cylinder(height, r, r, segs)
+    else:  # parallel lines (knurl, fins)
+        n, length = rng.integers(3, 8), face * rng.uniform(0.2, 0.6)
+        pitch = width * rng.uniform(2.0, 4.0)
+        line = Manifold.cube((length, width, height)).translate((-length / 2, -width / 2, 0))
+        tool = Manifold.batch_boolean(
+            [line.translate((0, (i - (n - 1) / 2) * pitch, 0)) for i in range(n)], OpType.Add)
+    engrave = rng.random() < 0.6
+    tool = tool.rotate((0, 0, rng.uniform(0, 180))).translate((0, 0, -depth if engrave else -unit))
+    return _along(tool, axis, sign).translate(tuple(point)), engrave
+
+
+# ---------------------------------------------------------------- CAD family
 
 
 def _part(rng, segs) -> Manifold:
@@ -231,9 +462,251 @@ def _assemble(rng, segs) -> Manifold:
     return Manifold.batch_boolean(parts, OpType.Add)
 
 
-def _random_rotation(rng) -> np.ndarray:
-    """(3, 3) rotation: uniform on SO(3), or a signed axis permutation (det +1)."""
-    if rng.random() < AXIS_ALIGNED_FRACTION:
+# ---------------------------------------------------------------- smooth family
+
+
+def _primitive(rng, segs, scale: float) -> Manifold:
+    """Sphere, ellipsoid, (tapered) capsule or torus about ``scale`` across, randomly turned,
+    centred at the origin."""
+    kind = rng.integers(4)
+    r = 0.5 * scale * rng.uniform(0.6, 1.0)
+    if kind == 0:
+        m = Manifold.sphere(r, segs)
+    elif kind == 1:
+        m = Manifold.sphere(r, segs).scale(tuple(rng.uniform(0.35, 1.0, 3)))
+    elif kind == 2:
+        rc = r * rng.uniform(0.2, 0.5)
+        ends = (Manifold.sphere(rc, segs).translate((0, 0, rc - r)),
+                Manifold.sphere(rc * rng.uniform(0.5, 1.0), segs).translate((0, 0, r - rc)))
+        m = Manifold.batch_hull(list(ends))
+    else:
+        minor = r * rng.uniform(0.15, 0.45)
+        m = CrossSection.circle(minor, segs).translate((r - minor, 0)).revolve(segs)
+    return m.rotate(tuple(rng.uniform(0, 360, 3)))
+
+
+def _smooth(rng, segs) -> Manifold:
+    """Union of 1-4 overlapping smooth primitives (sometimes with a box or cylinder), then
+    sometimes minus 1-2 more primitives or intersected with one."""
+    segs = max(segs, SMOOTH_SEGMENTS)
+    parts = [_placed(rng, _primitive(rng, segs, rng.uniform(0.4, 1.0)), 0.25)
+             for _ in range(rng.integers(1, 5))]
+    if rng.random() < 0.2:
+        block = _box(rng, segs) if rng.random() < 0.5 else _cylinder(rng, segs)
+        parts.append(_placed(rng, block, 0.25))
+    body = Manifold.batch_boolean(parts, OpType.Add)
+    u = rng.random()
+    if u < 0.3:
+        cuts = [_placed(rng, _primitive(rng, segs, rng.uniform(0.2, 0.6)), 0.4)
+                for _ in range(rng.integers(1, 3))]
+        body = Manifold.batch_boolean([body, *cuts], OpType.Subtract)
+    elif u < 0.45:
+        body = body ^ _placed(rng, _primitive(rng, segs, rng.uniform(0.7, 1.2)), 0.2)
+    return body
+
+
+# ---------------------------------------------------------------- organic family
+
+
+def _blob_field(rng) -> tuple[np.ndarray, float, np.ndarray, float]:
+    """Sampled metaball field: (X, Y, Z) float64 values, iso level, (3,) origin of sample 0
+    and the sample spacing. The field is padded with a below-level border, so its iso-surface
+    is closed."""
+    k = rng.integers(4, 15)
+    if rng.random() < 0.5:  # a chain: limbs, worms
+        centres = np.cumsum(rng.normal(0.0, 0.14, (k, 3)), axis=0)  # (k, 3)
+    else:  # a cluster
+        centres = rng.uniform(-0.35, 0.35, (k, 3))
+    sigma = rng.uniform(0.06, 0.16, (k, 1)) * rng.uniform(0.6, 1.6, (k, 3))  # (k, 3) anisotropic
+    weight = np.where(rng.random(k) < 0.2, -rng.uniform(0.3, 0.8, k), 1.0)  # some dents
+    weight[0] = 1.0
+    level = rng.uniform(0.3, 0.6)
+    lo, hi = (centres - 3.5 * sigma).min(axis=0), (centres + 3.5 * sigma).max(axis=0)
+    step = (hi - lo).max() / BLOB_GRID
+    axes = [np.arange(a, b + step, step) for a, b in zip(lo, hi)]
+    # Gaussians are separable: per-axis factors (k, n_axis), combined by one einsum
+    g = [np.exp(-0.5 * ((ax[None, :] - centres[:, i:i + 1]) / sigma[:, i:i + 1]) ** 2)
+         for i, ax in enumerate(axes)]
+    field = np.einsum("ki,kj,kl->ijl", weight[:, None] * g[0], g[1], g[2])  # (X, Y, Z)
+    if rng.random() < 0.6:  # smooth noise: sum of plane waves, each a product of 1-D phasors
+        j = 6
+        freq = rng.normal(0.0, 1.0, (j, 3))
+        freq *= rng.uniform(6.0, 16.0, (j, 1)) / np.linalg.norm(freq, axis=1, keepdims=True)
+        coef = rng.uniform(0.02, 0.08, j) * np.exp(1j * rng.uniform(0, 2 * np.pi, j))
+        w = [np.exp(1j * freq[:, i:i + 1] * ax[None, :]) for i, ax in enumerate(axes)]
+        field += np.einsum("ji,jk,jl->ikl", coef[:, None] * w[0], w[1], w[2]).imag
+    field = np.pad(field, 1, constant_values=level - 1.0)
+    return field, level, lo - step, step
+
+
+def _taubin(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Taubin lambda|mu smoothing (Laplacian without shrinkage): (V, 3) -> (V, 3)."""
+    lam, mu, steps = TAUBIN
+    n = len(verts)
+    i, j = faces.ravel(), np.roll(faces, 1, axis=1).ravel()
+    adj = sparse.coo_matrix((np.ones(2 * len(i)), (np.r_[i, j], np.r_[j, i])), shape=(n, n))
+    adj = adj.tocsr()
+    adj.data[:] = 1.0  # every edge is listed by both of its faces
+    mean = sparse.diags(1.0 / np.maximum(adj.sum(axis=1).A1, 1.0)) @ adj  # neighbour average
+    for _ in range(steps):
+        for w in (lam, mu):
+            verts = verts + w * (mean @ verts - verts)
+    return verts
+
+
+def _organic(rng, segs) -> Manifold:
+    """Metaball iso-surface (marching cubes, Taubin smoothing, simplification); sometimes cut
+    flat by a plane or drilled by a CAD cutter."""
+    field, level, origin, step = _blob_field(rng)
+    if field.max() <= level:  # the dents and the noise ate every blob
+        return Manifold()
+    verts, faces, _, _ = marching_cubes(field, level, spacing=(step, step, step))
+    verts = _taubin(verts.astype(np.float64) + origin, faces)
+    tri = verts[faces]  # (F, 3, 3)
+    if np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() < 0:
+        faces = faces[:, ::-1]  # outward orientation: positive signed volume
+    body = Manifold(Mesh64(vert_properties=np.ascontiguousarray(verts),
+                           tri_verts=np.ascontiguousarray(faces, dtype=np.uint64)))
+    if body.is_empty():
+        return body
+    body = body.simplify(BLOB_SIMPLIFY)
+    u = rng.random()
+    lo, hi = _bounds(body)
+    if u < 0.2:  # a flat cut through the lower part along a random direction
+        normal = rng.normal(size=3)
+        normal /= np.linalg.norm(normal)
+        reach = 0.5 * np.abs(normal) @ (hi - lo)
+        offset = normal @ (lo + hi) / 2 - reach * rng.uniform(0.2, 0.7)
+        body = body.trim_by_plane(tuple(normal), offset)
+    elif u < 0.35:
+        body = body - _cutter(rng, segs, lo, hi)
+    return body
+
+
+# ---------------------------------------------------------------- free-form family
+
+
+def _heightfield_block(rng, segs) -> Manifold:
+    """Box whose top is a smooth random height field (bumps, dents, waves), the columns below
+    stretched to follow it; sometimes pocketed or drilled."""
+    size = rng.uniform(*BODY_SIZE, 3)
+    size[2] *= rng.uniform(0.3, 0.8)
+    m = rng.integers(2, 7)
+    cen = rng.uniform(-0.5, 0.5, (m, 2)) * size[:2]  # (m, 2) bump centres
+    sig = rng.uniform(0.1, 0.35, m) * size[:2].max()
+    amp = rng.uniform(-0.5, 0.8, m) * max(size[2], 0.3 * size[:2].max())
+    wave = rng.normal(size=(2, 2)) * 2 * np.pi / size[:2].max()  # 2 plane waves (k_x, k_y)
+    wave_amp = rng.uniform(0.0, 0.1, 2) * size[2] * (rng.random() < 0.5)
+    phase = rng.uniform(0, 2 * np.pi, 2)
+
+    def lift(p: np.ndarray) -> np.ndarray:  # (n, 3) -> (n, 3)
+        d2 = ((p[:, None, :2] - cen) ** 2).sum(axis=-1)  # (n, m)
+        h = (amp * np.exp(-0.5 * d2 / sig**2)).sum(axis=1)
+        h += np.sin(p[:, :2] @ wave.T + phase) @ wave_amp
+        # dents ease off (smoothly) so the top stays above the bottom at -H/2
+        h = np.where(h < 0, size[2] * np.expm1(np.minimum(h, 0) / size[2]), h)
+        out = p.copy()
+        out[:, 2] += (p[:, 2] / size[2] + 0.5) * h  # bottom fixed, top moved by h
+        return out
+
+    body = Manifold.cube(size, center=True).refine_to_length(size.max() * WARP_EDGE)
+    body = body.warp_batch(lift)
+    lo, hi = _bounds(body)
+    cuts = [_cutter(rng, segs, lo, hi) for _ in range(rng.integers(0, 3))]
+    return Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
+
+
+def _warped_part(rng, segs) -> Manifold:
+    """A CAD part bent and bulged by a smooth injective space warp: p + sum of 3 sine
+    displacements whose summed Lipschitz constant stays below 0.6."""
+    part = _part(rng, segs)
+    lo, hi = _bounds(part)
+    ext = (hi - lo).max()
+    j = 3
+    freq = rng.normal(size=(j, 3))
+    wavelength = ext * rng.uniform(0.8, 2.5, (j, 1))
+    freq *= 2 * np.pi / (wavelength * np.linalg.norm(freq, axis=1, keepdims=True))
+    direction = rng.normal(size=(j, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    amp = rng.uniform(0.3, 1.0, j) * 0.6 / (j * np.linalg.norm(freq, axis=1))
+    phase = rng.uniform(0, 2 * np.pi, j)
+
+    def bend(p: np.ndarray) -> np.ndarray:  # (n, 3) -> (n, 3)
+        return p + (amp * np.sin(p @ freq.T + phase)) @ direction
+
+    return part.refine_to_length(ext * WARP_EDGE).warp_batch(bend)
+
+
+def _thin_walled(rng, segs) -> Manifold:
+    """Walls 1.5-3.5 voxels thick at 64^3: a revolved vessel, a finned plate, a tray with
+    partitions, or a bowl."""
+    kind = rng.integers(4)
+    size = rng.uniform(*BODY_SIZE, 3)
+    wall = size.max() * rng.uniform(*THIN_VOXELS) / DETAIL_RESOLUTION
+    if kind == 0:  # vessel: wall band of a smooth profile, with a floor
+        h, r_max = size[2], rng.uniform(0.2, 0.5)
+        wall = max(h, 2 * r_max) * rng.uniform(*THIN_VOXELS) / DETAIL_RESOLUTION
+        t = np.linspace(0.0, 1.0, PROFILE_POINTS)
+        outer = np.column_stack([r_max * _smooth_curve(rng, t, lo=0.45), t * h])
+        inner = outer[t * h >= 1.5 * wall] - [wall, 0.0]
+        return _revolve(np.vstack([outer, inner[::-1]]), max(segs, SMOOTH_SEGMENTS))
+    if kind == 1:  # plate with thin parallel fins
+        base_h = size[2] * rng.uniform(0.1, 0.3)
+        base = Manifold.cube((size[0], size[1], base_h))
+        n = rng.integers(3, 11)
+        pitch = size[0] / n
+        fin = Manifold.cube((min(wall, 0.5 * pitch), size[1], size[2]))
+        fins = [fin.translate(((i + 0.5) * pitch - wall / 2, 0, 0)) for i in range(n)]
+        return Manifold.batch_boolean([base, *fins], OpType.Add)
+    if kind == 2:  # open tray with thin walls and 1-3 partitions
+        cavity = Manifold.cube(size - 2 * wall, center=True).translate((0, 0, wall))
+        tray = Manifold.cube(size, center=True) - cavity
+        parts = [Manifold.cube((wall, size[1], size[2]), center=True).translate(
+            (rng.uniform(-0.35, 0.35) * size[0], 0, 0)) for _ in range(rng.integers(1, 4))]
+        return Manifold.batch_boolean([tray, *parts], OpType.Add)
+    radius = 0.5 * size.max()  # bowl: spherical shell cut by a plane, then squashed
+    shell = (Manifold.sphere(radius, max(segs, SMOOTH_SEGMENTS))
+             - Manifold.sphere(radius - wall, max(segs, SMOOTH_SEGMENTS)))
+    shell = shell.trim_by_plane((0, 0, -1), -radius * rng.uniform(-0.3, 0.5))
+    return shell.scale((1.0, rng.uniform(0.6, 1.0), rng.uniform(0.6, 1.0)))
+
+
+def _detailed(rng, segs) -> Manifold:
+    """A box, rounded block or cylinder with 3-9 engraved and embossed fine details."""
+    size = rng.uniform(*BODY_SIZE, 3)
+    kind = rng.integers(3)
+    axes = (0, 1, 2)
+    if kind == 0:
+        body = Manifold.cube(size, center=True)
+    elif kind == 1:
+        r = rng.uniform(*FILLET_FRACTION) * size[:2].min()
+        body = _slab(_rounded_rect(size[0], size[1], r, segs), size[2])
+    else:  # details only on the flat ends
+        body, axes = Manifold.cylinder(size[2], size[:2].min() / 2, -1.0, segs, True), (2,)
+    lo, hi = _bounds(body)
+    tools = [_detail_tool(rng, segs, lo, hi, axes) for _ in range(rng.integers(3, 10))]
+    adds = [tool for tool, engrave in tools if not engrave]
+    cuts = [tool for tool, engrave in tools if engrave]
+    if adds:
+        body = Manifold.batch_boolean([body, *adds], OpType.Add)
+    return Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
+
+
+def _freeform(rng, segs) -> Manifold:
+    """One of: height-field block, warped CAD part, thin-walled part, finely detailed body."""
+    builders = (_heightfield_block, _warped_part, _thin_walled, _detailed)
+    return builders[rng.integers(len(builders))](rng, segs)
+
+
+BUILDERS = {"cad": _assemble, "smooth": _smooth, "organic": _organic, "freeform": _freeform}
+
+
+# ---------------------------------------------------------------- assembly
+
+
+def _random_rotation(rng, aligned: bool) -> np.ndarray:
+    """(3, 3) rotation: a signed axis permutation (det +1) or uniform on SO(3)."""
+    if aligned:
         m = np.eye(3)[rng.permutation(3)] * rng.choice([-1.0, 1.0], 3)
         if np.linalg.det(m) < 0:
             m[2] = -m[2]
@@ -245,10 +718,10 @@ def _random_rotation(rng) -> np.ndarray:
     return q
 
 
-def _global_transform(m: Manifold, rng) -> Manifold:
+def _global_transform(m: Manifold, rng, aligned: bool) -> Manifold:
     """Non-uniform stretch along the part axes, then a rotation."""
     affine = np.zeros((3, 4))
-    affine[:, :3] = _random_rotation(rng) @ np.diag(rng.uniform(*STRETCH, 3))
+    affine[:, :3] = _random_rotation(rng, aligned) @ np.diag(rng.uniform(*STRETCH, 3))
     return m.transform(affine)
 
 
@@ -271,21 +744,32 @@ def _to_arrays(m: Manifold) -> tuple[np.ndarray, np.ndarray]:
     return (v - (lo + hi) / 2) / (hi - lo).max(), f
 
 
+def _edge_manifold(faces: np.ndarray) -> bool:
+    """Whether every undirected edge of the (F, 3) faces is shared by exactly two of them.
+
+    manifold3d can hand back an edge used by four triangles where two of its components touch
+    along a line (rare); such a mesh is not watertight for trimesh and is retried."""
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # (3F, 2)
+    _, counts = np.unique(edges[:, 0] * (faces.max() + 1) + edges[:, 1], return_counts=True)
+    return bool(np.all(counts == 2))
+
+
 def _attempt(seed: int, attempt: int) -> Manifold | None:
     """One draw of a shape; None when the booleans left nothing usable."""
+    family, aligned = _seed_draws(seed)
     rng = np.random.default_rng((seed, attempt))
     segs = int(rng.integers(SEGMENTS[0], SEGMENTS[1] + 1))
-    m = _global_transform(_assemble(rng, segs), rng)
+    m = BUILDERS[family](rng, segs)
     if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
         return None
-    m = _drop_slivers(m)
+    m = _drop_slivers(_global_transform(m, rng, aligned))
     lo, hi = _bounds(m)
     # reject needles and sheets: after normalisation some side would be sub-voxel
     return m if (hi - lo).min() > 0.05 * (hi - lo).max() else None
 
 
 def generate_shape(seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """A watertight CAD-like solid, deterministic in ``seed``.
+    """A watertight solid of family ``shape_family(seed)``, deterministic in ``seed``.
 
     Args:
         seed: non-negative integer.
@@ -297,7 +781,9 @@ def generate_shape(seed: int) -> tuple[np.ndarray, np.ndarray]:
     for attempt in range(MAX_ATTEMPTS):
         m = _attempt(seed, attempt)
         if m is not None:
-            return _to_arrays(m)
+            vertices, faces = _to_arrays(m)
+            if _edge_manifold(faces):
+                return vertices, faces
     return _to_arrays(Manifold.cube((1.0, 0.7, 0.5), center=True))  # never reached in practice
 
 

@@ -1,6 +1,4 @@
-"""Every numeric tolerance of the package, named in one place with the reason for its value.
-
-Tests switch ``tol.strict`` on to enable extra self-checks (as trimesh does)."""
+"""Every numeric tolerance of the package, named in one place with the reason for its value."""
 
 from dataclasses import dataclass
 
@@ -15,12 +13,8 @@ class Tolerances:
     qef_pull: float = 1e-6
     # QEF eigenvalues below this fraction of the largest are treated as zero (flat or edge cells)
     qef_singular: float = 0.05
-    # two contoured vertices closer than this (grid units) are merged when merging is requested
-    merge: float = 1e-6
     # a cell counts as "containing" a sample if it is inside the cell dilated by this (grid units)
     cell_slack: float = 1e-9
-    # when True, internal invariants are checked at run time (slower; tests switch it on)
-    strict: bool = False
 
 
 tol = Tolerances()

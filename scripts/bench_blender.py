@@ -34,7 +34,8 @@ def parse_args(argv):
     parser.add_argument("--res", type=int, nargs="+", default=[64, 128])
     parser.add_argument("--methods", nargs="+", default=None,
                         help="default: mc, plus agndc when its weights are shipped")
-    parser.add_argument("--seed", type=int, default=7, help="generate_shape seed")
+    parser.add_argument("--seed", type=int, default=7,
+                        help="cad_part seed (first CAD seed at or after it)")
     parser.add_argument("--size", type=float, default=2.0, help="longest side of the part")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--install-zip", type=Path, help="install this extension zip first")
@@ -135,10 +136,10 @@ def main(argv) -> int:
     args = parse_args(argv)
     install_seconds = install(args.install_zip) if args.install_zip else None
     remesh, mesh_io = load_addon()
-    from agndc_core.shapes import generate_shape
+    from agndc_core.shapes import cad_part
 
     bpy.ops.wm.read_homefile(use_empty=True)
-    vertices, faces = generate_shape(args.seed)
+    vertices, faces = cad_part(args.seed)
     vertices = vertices * args.size
     source = bpy.data.objects.new("Part", mesh_io.new_mesh("Part", vertices, faces))
     bpy.context.scene.collection.objects.link(source)
@@ -171,7 +172,7 @@ def main(argv) -> int:
             size, voxel_count = matching_voxel_size(source, count, args.size / res)
             voxel_s, _ = median_time(lambda s=size: voxel_remesh(source, s), args.repeat)
             rows.append((res, method, count, op_s, api_s, size, voxel_count, voxel_s))
-    print(f"\nbpy {bpy.app.version_string}, part: generate_shape({args.seed}) x {args.size} "
+    print(f"\nbpy {bpy.app.version_string}, part: cad_part({args.seed}) x {args.size} "
           f"({len(faces):,} triangles), {os.cpu_count()} CPUs, median of {args.repeat}")
     if install_seconds is not None:
         size_mb = args.install_zip.stat().st_size / 1e6

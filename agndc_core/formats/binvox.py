@@ -18,10 +18,12 @@ trimesh instead maps the first and last voxel *centres* to ``translate`` and
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from ..errors import GridFileError
-from ..grid import MAX_VOXELS, as_occupancy
+from ..errors import GridError, GridFileError
+from ..grid import MAX_VOXELS
 
 MAX_HEADER_LINES = 200  # a header is ~5 lines; stop long before scanning a whole binary file
 MAX_RUN = 255  # a count is one byte
@@ -114,10 +116,16 @@ def rle_encode(flat: np.ndarray) -> np.ndarray:
 def guard_size(dims, name: str) -> None:
     """Refuse a header-declared grid that is too large *before* allocating it.
 
-    The check itself is grid.py's (``as_occupancy``), run on a zero-cost broadcast view.
+    The product is taken in Python ints: a corrupt header's sizes overflow int64 (2**32 cubed
+    wraps to 0). Same error and wording as grid.py's ``as_occupancy`` check.
     """
-    if int(np.prod(np.asarray(dims, dtype=np.int64))) > MAX_VOXELS:
-        as_occupancy(np.broadcast_to(False, tuple(int(d) for d in dims)), name=name)
+    dims = tuple(int(d) for d in dims)
+    count = math.prod(dims)
+    if count > MAX_VOXELS:
+        raise GridError(
+            f"{name}: grid {dims} has {count:,} voxels, more than the {MAX_VOXELS:,} this "
+            "remesher handles in memory; downsample it first"
+        )
 
 
 def _parse_header(data: bytes, name: str) -> tuple[dict, bytes]:
@@ -153,7 +161,9 @@ def _header_values(key: str, values: list[str], name: str):
         numbers = []
     if key == "dim" and len(numbers) == 1:
         numbers *= 3  # some old writers give one size for a cube
-    if len(numbers) != expected or not np.all(np.isfinite(numbers)):
+    # dim values are ints (always finite, maybe too large for a float); the others are floats
+    finite = key == "dim" or all(math.isfinite(n) for n in numbers)
+    if len(numbers) != expected or not finite:
         raise GridFileError(f"{name}: bad binvox header line '{key} {' '.join(values)}'")
     if key == "dim":
         if min(numbers) < 1:

@@ -22,6 +22,7 @@ from torch import nn
 
 from ..errors import ModelError
 from ..grid import pool_occupancy
+from ..surfacenets import CENTRE, surface_nets_offsets
 from .band_ops import BandOps, scale_ops, snake_margin, torus_periods
 from .config import AGNDCConfig
 from .crpm import CRPM
@@ -29,6 +30,7 @@ from .dense_ops import DenseOps
 from .dffm import DFFM
 from .fdm import FDM, PredictionHead
 from .gdfem import GDFEM
+from .snake import DSConv
 
 
 class AGDRNet(nn.Module):
@@ -68,6 +70,7 @@ class AGNDCCascade(nn.Module):
         self.nets = nn.ModuleList([AGDRNet(self.config, coarsest=(s == levels))
                                    for s in range(levels + 1)])
         self.apply(self._init_weights)
+        self._init_outputs()
 
     def _init_weights(self, module: nn.Module) -> None:
         """He-normal weights for the LeakyReLU stacks (signals neither vanish nor explode with
@@ -79,6 +82,38 @@ class AGNDCCascade(nn.Module):
                 nn.init.zeros_(module.bias)
         if isinstance(module, PredictionHead):
             module.reset_edge_prior()
+
+    @torch.no_grad()
+    def _init_outputs(self, root: nn.Module | None = None, snakes: bool = True) -> None:
+        """Start every vertex output at the cell centre (the surface nets vertex once the prior
+        is added) and every snake straight: zero weights there, as deformable-convolution
+        practice does for offsets; a randomly bent kernel or a random vertex is pure noise that
+        the first thousand steps would only spend undoing. ``root``: only its modules (e.g. one
+        scale's net, to restart a warm-started network's vertex output)."""
+        for module in (root or self).modules():
+            if isinstance(module, PredictionHead):
+                module.fc2.weight[:3] = 0.0
+                module.fc2.bias[:3] = CENTRE
+            elif isinstance(module, DFFM):
+                module.out.weight[:3] = 0.0  # W_s's vertex part is added to P'_s without CRPM
+                module.out.bias[:3] = 0.0
+            elif isinstance(module, DSConv) and snakes:
+                module.offset.weight.zero_()
+                module.offset.bias.zero_()
+
+    def add_prior(self, p0: torch.Tensor, occupancy0) -> torch.Tensor:
+        """P_0 (..., X, Y, Z, 6) channel-last + the surface nets prior of its occupancy.
+
+        The prior is the *delta* from the cell centre (zero in cells with no crossed edge), so
+        the far field of band inference is unchanged. Identity without ``surface_nets_prior``.
+        """
+        if not self.config.surface_nets_prior:
+            return p0
+        if isinstance(occupancy0, np.ndarray):
+            occupancy0 = torch.from_numpy(np.ascontiguousarray(occupancy0))
+        delta = surface_nets_offsets(occupancy0.to(p0.device)) - CENTRE
+        # (..., X, Y, Z, 6): no prior on the edge logits
+        return p0 + F.pad(delta, (0, 3)).to(p0.dtype)
 
     @property
     def levels(self) -> int:
@@ -115,6 +150,8 @@ class AGNDCCascade(nn.Module):
             # (B, X/2, Y/2, Z/2, 6)
             coarse = p_coarser.permute(0, 2, 3, 4, 1)
         out = self.nets[s](g_s, coarse, DenseOps(g_s.shape[1:]), 0)
+        if s == 0:
+            out = self.add_prior(out, g_s)
         # (B, 6, X, Y, Z)
         return out.permute(0, 4, 1, 2, 3)
 
@@ -195,6 +232,7 @@ class AGNDCCascade(nn.Module):
             rows, ops = self.band_scale(s, grids[s], coarser, radius)
             preds[s] = ops.to_dense(rows)
             coarser = (preds[s], rows[:ops.torus])
+        preds[0] = self.add_prior(preds[0], grids[0])
         return preds
 
 

@@ -56,6 +56,11 @@ class AGNDCConfig:
     use_dffm: bool = True
     # False: P_s = P'_s + W_s instead of CRPM(W_s, P'_s) (needs levels >= 1)
     use_crpm: bool = True
+    # True: the finest scale predicts a correction to the surface nets vertex (surfacenets.py),
+    # vertex = surface_nets + (network - 0.5); its vertex head starts at zero weights, so an
+    # untrained cascade already returns surface nets and training only has to learn what a
+    # binary neighbourhood says beyond the mean of the crossed-edge midpoints
+    surface_nets_prior: bool = True
 
     def __post_init__(self) -> None:
         self.validate()

@@ -23,7 +23,17 @@ def add_train_parser(sub) -> None:
     p.add_argument("--model", default="{}", help='AGNDCConfig fields as JSON, e.g. {"width": 16}')
     p.add_argument("--undc", action="store_true", help="the UNDC baseline (one scale, plain convs)")
     p.add_argument("--steps", default="1000,500,500", help="steps per scale s = 0,1,..")
-    p.add_argument("--crop", default="24,16,32", help="crop edge per scale s = 0,1,..")
+    p.add_argument("--crop", default="32,24,32", help="crop edge per scale s = 0,1,..")
+    p.add_argument("--margin", default="6,4,2", help="unscored border per scale s = 0,1,.. "
+                   "(cells whose context the crop cuts off)")
+    p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:1, ...")
+    p.add_argument("--no-amp", action="store_true", help="no bf16 autocast on CUDA")
+    p.add_argument("--workers", type=int, default=0, help="data-loader processes building crops")
+    p.add_argument("--init", help="warm start from this checkpoint (.safetensors)")
+    p.add_argument("--max-minutes", type=float, help="save the state and stop after this much "
+                   "wall time (continue with --resume): chunks on a time-limited GPU lease")
+    p.add_argument("--val-steps", default="", help="finest-scale steps after which the --val "
+                   "samples are scored (learning curve), e.g. 100,300,1000")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)
@@ -60,8 +70,14 @@ def _cmd_train(args) -> int:
         model = {**undc_baseline(model.get("width", 64)).to_dict(), **model}
     cfg = TrainConfig(data=str(args.data), out=str(args.out), val=str(args.val) if args.val
                       else None, model=model, steps=_ints(args.steps), crop=_ints(args.crop),
-                      batch=args.batch, lr=args.lr, seed=args.seed, threads=args.threads)
+                      batch=args.batch, lr=args.lr, seed=args.seed, threads=args.threads,
+                      margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
+                      workers=args.workers, init=args.init, val_steps=_ints(args.val_steps),
+                      max_seconds=args.max_minutes * 60 if args.max_minutes else None)
     path = train(cfg, resume=args.resume)
+    if path is None:
+        print(f"stopped after {args.max_minutes} minutes; continue with --resume")
+        return 0
     print(f"checkpoint: {path}")
     if args.ship:
         WEIGHTS_DIR.mkdir(parents=True, exist_ok=True)

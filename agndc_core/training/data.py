@@ -18,10 +18,10 @@ import numpy as np
 
 from ..grid import pad_to_lattice
 from ..labels import make_labels
-from ..shapes import generate_shape
+from ..shapes import generate_shape, is_axis_aligned, shape_family
 from ..voxelize import voxelize
 
-RESOLUTION_RANGE = (40, 64)  # voxels on the longest side (random scale)
+RESOLUTION_RANGE = (32, 128)  # voxels on the longest side (random scale, log-uniform)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -33,15 +33,33 @@ def random_rotation(rng) -> np.ndarray:
     return q
 
 
-def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.5) -> dict:
-    """The augmentation parameters of sample ``seed`` (deterministic)."""
+def log_uniform_int(rng, lo: int, hi: int) -> int:
+    """An integer in [lo, hi] with log-uniform probability (as many draws in 32..64 as in
+    64..128), so small and large grids are both common."""
+    return int(min(np.floor(np.exp(rng.uniform(np.log(lo), np.log(hi + 1)))), hi))
+
+
+def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0) -> dict:
+    """The augmentation parameters of sample ``seed`` (deterministic).
+
+    ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
+    free rotation, so those are never rotated again here; ``rotate_fraction`` is the share of
+    the generator's axis-aligned shapes that get a random rotation here. The share of
+    grid-aligned samples is ``AXIS_ALIGNED_FRACTION * (1 - rotate_fraction)`` (0.35 by default).
+    The recipe also records the shape family and whether the sample is grid-aligned.
+    """
     rng = np.random.default_rng([seed, 1234])
-    rotation = random_rotation(rng) if rng.random() < rotate_fraction else np.eye(3)
+    # every draw is made, used or not, so the later ones do not depend on the branch
+    rotation, u_rotate = random_rotation(rng), rng.random()
+    generator_aligned = is_axis_aligned(seed)
+    rotate = generator_aligned and u_rotate < rotate_fraction  # never a second rotation
     return {
         "seed": int(seed),
-        "resolution": int(rng.integers(resolution_range[0], resolution_range[1] + 1)),
-        "rotation": rotation.tolist(),
+        "resolution": log_uniform_int(rng, *resolution_range),
+        "rotation": (rotation if rotate else np.eye(3)).tolist(),
         "shift": rng.uniform(-0.5, 0.5, size=3).tolist(),
+        "family": shape_family(seed),
+        "axis_aligned": generator_aligned and not rotate,
     }
 
 
@@ -60,10 +78,22 @@ def make_sample(recipe: dict) -> dict:
     for level, scale in enumerate(labels):
         arrays[f"edge{level}"] = scale.edge
         arrays[f"vertex{level}"] = scale.vertex
+        arrays[f"quadric{level}"] = scale.quadric
         arrays[f"surface{level}"] = scale.surface
         arrays[f"inside{level}"] = scale.inside
+    # the ground truth travels with the sample: validation never depends on the generator
+    # version that is installed when it runs
+    arrays["mesh_vertices"] = vertices.astype(np.float64)
+    arrays["mesh_faces"] = faces.astype(np.int32)
     arrays["recipe"] = np.array(json.dumps(recipe))
     return arrays
+
+
+def sample_mesh(sample: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The ground-truth mesh of a loaded sample (stored; older samples: regenerated)."""
+    if "mesh_vertices" in sample:
+        return sample["mesh_vertices"], sample["mesh_faces"].astype(np.int64)
+    return recipe_mesh(sample["recipe"])
 
 
 def _write_one(args) -> str:

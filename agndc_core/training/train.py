@@ -22,19 +22,25 @@ import numpy as np
 import torch
 
 from ..errors import AGNDCError
-from .crops import make_crop, random_crop_origin, sample_pyramid
+from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
+
+#: largest file the trainer writes (state shards included): what a GPU lease can bring back
+MAX_FILE_BYTES = 15 * 2**20
 
 
 @dataclass
 class TrainConfig:
-    data: str  # folder of samples written by data.build_dataset
+    data: str  # folder(s) of samples written by data.build_dataset (comma-separated)
     out: str  # run directory
     val: str | None = None  # folder of held-out samples (CD/F1 after the finest scale)
     model: dict = field(default_factory=dict)  # AGNDCConfig fields
     steps: list = field(default_factory=lambda: [1000, 500, 500])  # per scale s = 0..levels
     batch: int = 4
-    crop: list = field(default_factory=lambda: [24, 16, 32])  # crop edge per scale s (clipped)
+    crop: list = field(default_factory=lambda: [32, 24, 32])  # crop edge per scale s (clipped)
+    # cells this close to a crop border that lies inside the lattice are not scored: the
+    # network replicate-pads there, so their context is invented (per scale s)
+    margin: list = field(default_factory=lambda: [6, 4, 2])
     lr: float = 2e-3
     warmup: int = 50
     seed: int = 0
@@ -43,6 +49,18 @@ class TrainConfig:
     save_every: int = 100
     val_count: int = 8
     val_samples: int = 20_000  # surface samples per mesh for the validation metrics
+    device: str = "cpu"  # "cpu", "cuda", "cuda:1", ...
+    amp: bool = True  # bf16 autocast on CUDA (ignored on the CPU)
+    workers: int = 0  # data-loader worker processes building crops (0: in the main process)
+    # warm start: a checkpoint (.safetensors) of the same architecture whose weights start the
+    # run; if it predicted absolute offsets (no surface nets prior), its vertex heads restart
+    # at zero so the run starts exactly at surface nets
+    init: str | None = None
+    # steps of the finest scale after which the held-out samples are scored (learning curve)
+    val_steps: list = field(default_factory=list)
+    # stop cleanly (state saved, ``--resume`` continues) once this much wall time has passed:
+    # one call on a lent GPU machine is limited to 10 minutes; None = no limit
+    max_seconds: float | None = None
 
 
 class Trainer:
@@ -58,13 +76,35 @@ class Trainer:
                              f"got {cfg.steps}")
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.threads)
-        self.model = AGNDCCascade(self.model_config)
-        self.losses = torch.nn.ModuleList([AGNDCLoss() for _ in range(levels + 1)])
+        self.device = torch.device(cfg.device)
+        if self.device.type == "cuda" and not torch.cuda.is_available():
+            raise AGNDCError(f"--device {cfg.device}: this torch build sees no CUDA device")
+        self.model = AGNDCCascade(self.model_config).to(self.device)
+        # the finest scale's edges are the input's crossing parity when the vertex prior (and
+        # input topology) is used: no edge loss there, its gradient would train a dead head
+        self.losses = torch.nn.ModuleList([
+            AGNDCLoss(train_edges=not (s == 0 and self.model_config.surface_nets_prior))
+            for s in range(levels + 1)]).to(self.device)
+        if cfg.init:
+            self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels)
         self.log: list[dict] = []
         self.scale, self.step = levels, 0  # next step to run
         self.optimizer = self._optimizer(self.scale)
         self.seconds = 0.0
+
+    def _warm_start(self, path: str) -> None:
+        from ..checkpoint import load_checkpoint
+
+        source, _ = load_checkpoint(path)
+        mine, theirs = self.model_config.to_dict(), source.config.to_dict()
+        differ = sorted(k for k in mine if k not in ("surface_nets_prior", "band_radius")
+                        and mine[k] != theirs.get(k))
+        if differ:
+            raise AGNDCError(f"--init {path}: its architecture differs in {', '.join(differ)}")
+        self.model.load_state_dict(source.state_dict())
+        if self.model_config.surface_nets_prior and not source.config.surface_nets_prior:
+            self.model._init_outputs(self.model.nets[0], snakes=False)
 
     # ------------------------------------------------------------------ schedule
     def _optimizer(self, s: int):
@@ -80,28 +120,22 @@ class Trainer:
 
     # ------------------------------------------------------------------ one step
     def crop_size(self, s: int) -> int:
-        block = 2 ** (self.model_config.levels - s)
-        largest = max(max(x["grids"][s].shape) for x in self.samples)
-        crop = self.cfg.crop[s] if isinstance(self.cfg.crop, (list, tuple)) else self.cfg.crop
-        size = min(int(crop), -(-largest // block) * block)
-        return max(block, size // block * block)
+        return crop_size(self.cfg, self.model_config, self.samples, s)
 
     def batch(self, s: int, step: int) -> dict:
         """Tensors of one batch of crops of scale s (deterministic in seed, s, step)."""
-        rng = np.random.default_rng([self.cfg.seed, s, step])
-        size = self.crop_size(s)
-        align = self.model_config.window * 2 ** (self.model_config.levels - s)
-        crops = []
-        for i in rng.integers(len(self.samples), size=self.cfg.batch):
-            sample = self.samples[i]
-            origin = random_crop_origin(sample[f"surface{s}"], size, align, rng)
-            crops.append(make_crop(sample, sample["grids"], s, size, origin,
-                                   rng.permutation(3), rng.random(3) < 0.5))
-        out = {"g": [torch.from_numpy(np.stack([c["g"][k] for c in crops]))
-                     for k in range(len(crops[0]["g"]))]}
-        for key in ("vertex", "edge", "surface"):
-            out[key] = torch.from_numpy(np.stack([c[key] for c in crops]))
-        return out
+        return make_batch(self.cfg, self.model_config, self.samples, s, step)
+
+    def _batches(self, s: int, start: int, total: int):
+        """Batches for steps start..total-1, built by worker processes when cfg.workers > 0."""
+        if self.cfg.workers <= 0:
+            return (self.batch(s, step) for step in range(start, total))
+        loader = torch.utils.data.DataLoader(
+            _BatchSource(self.cfg, self.model_config, self.samples, s),
+            batch_size=None, sampler=range(start, total), num_workers=self.cfg.workers,
+            pin_memory=self.device.type == "cuda", prefetch_factor=4,
+            worker_init_fn=_one_thread)
+        return iter(loader)
 
     def predict_coarser(self, s: int, g: list) -> torch.Tensor | None:
         """P_{s+1} of the frozen coarser networks on the crop's coarser inputs."""
@@ -111,17 +145,29 @@ class Trainer:
         p = None
         with torch.no_grad():
             for t in reversed(range(s + 1, levels + 1)):
-                p = self.model.forward_scale(t, g[t - s], p)
+                with self._autocast():
+                    p = self.model.forward_scale(t, g[t - s], p)
+                p = p.float()
         return p
 
-    def train_step(self, s: int, step: int) -> dict:
-        batch = self.batch(s, step)
+    def _autocast(self):
+        use = self.cfg.amp and self.device.type == "cuda"
+        return torch.autocast(self.device.type, dtype=torch.bfloat16, enabled=use)
+
+    def train_step(self, s: int, step: int, batch: dict | None = None) -> dict:
+        if batch is None:
+            batch = self.batch(s, step)
+        batch = {k: ([t.to(self.device, non_blocking=True) for t in v] if isinstance(v, list)
+                     else v.to(self.device, non_blocking=True)) for k, v in batch.items()}
         coarser = self.predict_coarser(s, batch["g"])
         self.model.nets[s].train()
         for group in self.optimizer.param_groups:
             group["lr"] = self._lr(s, step)
-        pred = self.model.forward_scale(s, batch["g"][0], coarser)
-        loss, parts = self.losses[s](pred, batch["vertex"], batch["edge"], batch["surface"])
+        with self._autocast():
+            pred = self.model.forward_scale(s, batch["g"][0], coarser)
+        loss, parts = self.losses[s](pred.float(), batch["vertex"], batch["edge"],
+                                     batch["surface"] & batch["valid"], batch["valid"],
+                                     batch.get("quadric"))
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         torch.nn.utils.clip_grad_norm_(self.model.nets[s].parameters(), 1.0)
@@ -129,10 +175,13 @@ class Trainer:
         return {"loss": float(loss.detach()), **parts}
 
     # ------------------------------------------------------------------ loop
-    def run(self, progress: bool = True) -> Path:
+    def run(self, progress: bool = True) -> Path | None:
+        """Train the remaining steps; the final checkpoint's path, or None when ``max_seconds``
+        ran out first (the state is saved and ``resume`` continues exactly)."""
         from tqdm import tqdm
 
         levels = self.model_config.levels
+        started = time.perf_counter()
         for s in reversed(range(levels + 1)):
             if s > self.scale:
                 continue  # finished before a resume
@@ -142,9 +191,10 @@ class Trainer:
             total = self.cfg.steps[s]
             bar = tqdm(total=total, initial=self.step, desc=f"scale {s}", disable=not progress)
             window: list[dict] = []
+            batches = self._batches(s, self.step, total)
             while self.step < total:
                 start = time.perf_counter()
-                window.append(self.train_step(s, self.step))
+                window.append(self.train_step(s, self.step, next(batches)))
                 self.seconds += time.perf_counter() - start
                 self.step += 1
                 bar.update(1)
@@ -155,8 +205,16 @@ class Trainer:
                     self.log.append(entry)
                     bar.set_postfix(v=f"{entry['vertex']:.4f}", e=f"{entry['edge']:.4f}")
                     window = []
+                if s == 0 and self.step in self.cfg.val_steps and self.cfg.val:
+                    self.log.append({"scale": 0, "step": self.step,
+                                     "seconds": round(self.seconds, 1), "val": self.validate()})
                 if self.step % self.cfg.save_every == 0:
                     self.save_state()
+                if self.cfg.max_seconds and time.perf_counter() - started > self.cfg.max_seconds \
+                        and self.step < total:
+                    bar.close()
+                    self.save_state()
+                    return None
             bar.close()
             self.save_state()
         metrics = self.validate() if self.cfg.val else {}
@@ -173,12 +231,17 @@ class Trainer:
         from ..checkpoint import save_checkpoint
 
         training = {
-            "recipe": "agndc_core.training (procedural CAD parts, training/data.py)",
+            "recipe": "agndc_core.training (procedural shapes, training/data.py); finest scale: "
+                      "correction to the surface nets vertex, no edge loss; loss only on cells "
+                      "with `margin` points of real context; zero-initialised vertex heads and "
+                      "snake offsets",
             "data": {"folder": self.cfg.data, "samples": len(self.samples),
-                     "seeds": [int(min(x["recipe"]["seed"] for x in self.samples)),
-                               int(max(x["recipe"]["seed"] for x in self.samples))],
-                     "augmentation": "rotation 50%, resolution 40-64, sub-voxel shift, "
-                                     "axis permutation + flips"},
+                     "seeds": [int(min(x.recipe["seed"] for x in self.samples)),
+                               int(max(x.recipe["seed"] for x in self.samples))],
+                     "resolutions": [int(min(x.recipe["resolution"] for x in self.samples)),
+                                     int(max(x.recipe["resolution"] for x in self.samples))],
+                     "augmentation": "random rotation (part of the samples), resolution, "
+                                     "sub-voxel shift; 48 axis permutations x flips per crop"},
             "config": asdict(self.cfg),
             "steps_per_scale": list(self.cfg.steps),
             "train_seconds": round(self.seconds, 1),
@@ -191,21 +254,16 @@ class Trainer:
 
     # ------------------------------------------------------------------ resume
     def save_state(self) -> None:
-        from safetensors.torch import save_file
-
+        """Model, loss weights and optimiser state, sharded under MAX_FILE_BYTES per file."""
         self.out.mkdir(parents=True, exist_ok=True)
-        tensors = {f"model.{k}": v.detach().contiguous() for k, v in
-                   self.model.state_dict().items()}
-        tensors.update({f"loss.{k}": v.detach().contiguous()
-                        for k, v in self.losses.state_dict().items()})
+        tensors = {f"model.{k}": v for k, v in self.model.state_dict().items()}
+        tensors.update({f"loss.{k}": v for k, v in self.losses.state_dict().items()})
         opt = self.optimizer.state_dict()
         for index, state in opt["state"].items():
             for name, value in state.items():
-                tensors[f"optim.{index}.{name}"] = torch.as_tensor(value).contiguous()
-        tmp = self.out / "state.safetensors.tmp"
-        save_file(tensors, str(tmp))
-        tmp.replace(self.out / "state.safetensors")
-        self._write_run_json(done=False, param_groups=opt["param_groups"])
+                tensors[f"optim.{index}.{name}"] = torch.as_tensor(value)
+        shards = save_sharded(tensors, self.out, "state")
+        self._write_run_json(done=False, param_groups=opt["param_groups"], shards=shards)
 
     def _write_run_json(self, done: bool, **extra) -> None:
         info = {"config": asdict(self.cfg), "model_config": self.model_config.to_dict(),
@@ -214,16 +272,16 @@ class Trainer:
         (self.out / "run.json").write_text(json.dumps(info, indent=1))
 
     def resume(self) -> bool:
-        """Load ``state.safetensors`` + ``run.json`` if present; True if resumed."""
-        from safetensors.torch import load_file
-
-        state_path, info_path = self.out / "state.safetensors", self.out / "run.json"
-        if not (state_path.exists() and info_path.exists()):
+        """Load ``run.json`` and its state shards if present; True if resumed."""
+        info_path = self.out / "run.json"
+        if not info_path.exists():
             return False
         info = json.loads(info_path.read_text())
+        if not info.get("shards") or not all((self.out / n).exists() for n in info["shards"]):
+            return False
         if info["model_config"] != self.model_config.to_dict():
             raise AGNDCError(f"{info_path}: the run was started with another model config")
-        tensors = load_file(str(state_path))
+        tensors = {k: v.to(self.device) for k, v in load_sharded(self.out, info["shards"]).items()}
         self.model.load_state_dict({k[6:]: v for k, v in tensors.items()
                                     if k.startswith("model.")})
         self.losses.load_state_dict({k[5:]: v for k, v in tensors.items()
@@ -242,25 +300,117 @@ class Trainer:
         return True
 
 
-def _load_folder(folder, levels: int) -> list[dict]:
-    paths = sorted(Path(folder).glob("sample_*.npz"))
+def _load_folder(folder, levels: int) -> list[SparseSample]:
+    """Samples of one folder, or of several separated by commas."""
+    paths = sorted(p for f in str(folder).split(",") for p in Path(f).glob("sample_*.npz"))
     if not paths:
         raise AGNDCError(f"no training samples (sample_*.npz) in {folder}; build them with "
                          "`agndc train-data`")
-    samples = []
-    for path in paths:
-        sample = load_sample(path)
-        keep = {"recipe": sample["recipe"], "grids": sample_pyramid(sample["lattice"], levels)}
-        for s in range(levels + 1):
-            keep[f"vertex{s}"] = sample[f"vertex{s}"].astype(np.float32)
-            keep[f"edge{s}"] = sample[f"edge{s}"]
-            keep[f"surface{s}"] = sample[f"surface{s}"]
-        samples.append(keep)
-    return samples
+    return [SparseSample(load_sample(path), levels) for path in paths]
 
 
-def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path:
-    """Run (or resume) a training run; returns the final checkpoint's weights path."""
+def crop_size(cfg: TrainConfig, model_config, samples: list[SparseSample], s: int) -> int:
+    """Crop edge of scale s: the configured one, at most the largest lattice, block-aligned."""
+    block = 2 ** (model_config.levels - s)
+    largest = max(max(x.shapes[s]) for x in samples)
+    crop = cfg.crop[s] if isinstance(cfg.crop, (list, tuple)) else cfg.crop
+    size = min(int(crop), -(-largest // block) * block)
+    return max(block, size // block * block)
+
+
+def make_batch(cfg: TrainConfig, model_config, samples: list[SparseSample], s: int,
+               step: int) -> dict:
+    """Tensors of one batch of crops of scale s, a pure function of (cfg.seed, s, step).
+
+    Returns:
+        {"g": [(B, n, n, n) bool of scale s, (B, n/2, ...) of s + 1, ...],
+         "vertex": (B, n, n, n, 3) float32, "edge": (B, n, n, n, 3) bool,
+         "surface": (B, n, n, n) bool, "valid": (B, n, n, n) bool (``crops.valid_cells``),
+         "quadric": (B, n, n, n, 6) float32 when the samples have normal quadrics}
+    """
+    rng = np.random.default_rng([cfg.seed, s, step])
+    size = crop_size(cfg, model_config, samples, s)
+    align = model_config.window * 2 ** (model_config.levels - s)
+    margins = cfg.margin if isinstance(cfg.margin, (list, tuple)) else [cfg.margin] * (s + 1)
+    margin = int(margins[s]) if s < len(margins) else 0
+    crops = []
+    for i in rng.integers(len(samples), size=cfg.batch):
+        sample = samples[i]
+        origin = random_crop_origin(sample.cells[s], size, align, rng, margin,
+                                    dims=sample.shapes[s])
+        perm, flips = rng.permutation(3), rng.random(3) < 0.5
+        # a dense window one alignment step larger on each side (make_crop reads one cell
+        # before the crop; alignment keeps the pooled inputs on the lattice's own pyramid)
+        window = sample.window(s, np.asarray(origin) - align, [size + 2 * align] * 3)
+        grids = [None] * s + window.pop("grids")
+        crop = make_crop(window, grids, s, size, [align] * 3, perm, flips)
+        crop["valid"] = valid_cells(origin, size, sample.shapes[s], margin, perm, flips)
+        crops.append(crop)
+    out = {"g": [torch.from_numpy(np.stack([c["g"][k] for c in crops]))
+                 for k in range(len(crops[0]["g"]))]}
+    for key in ("vertex", "edge", "surface", "valid", "quadric"):
+        if all(key in c for c in crops):
+            out[key] = torch.from_numpy(np.stack([c[key] for c in crops]))
+    return out
+
+
+class _BatchSource(torch.utils.data.Dataset):
+    """Map-style dataset whose item ``step`` is that step's batch (for DataLoader workers)."""
+
+    def __init__(self, cfg, model_config, samples, s):
+        self.cfg, self.model_config, self.samples, self.s = cfg, model_config, samples, s
+
+    def __len__(self) -> int:
+        return int(self.cfg.steps[self.s])
+
+    def __getitem__(self, step: int) -> dict:
+        return make_batch(self.cfg, self.model_config, self.samples, self.s, int(step))
+
+
+def _one_thread(_worker: int) -> None:
+    torch.set_num_threads(1)  # crop building is numpy; leave the cores to the network
+
+
+def save_sharded(tensors: dict, folder: Path, stem: str) -> list[str]:
+    """Write ``tensors`` as ``stem-000.safetensors``, ... each under MAX_FILE_BYTES.
+
+    Returns the shard file names (a single tensor larger than the limit gets a shard alone).
+    """
+    from safetensors.torch import save_file
+
+    shards, current, size = [], {}, 0
+    for name, tensor in tensors.items():
+        nbytes = tensor.numel() * tensor.element_size()
+        if current and size + nbytes > MAX_FILE_BYTES:
+            shards.append(current)
+            current, size = {}, 0
+        current[name], size = tensor.detach().cpu().contiguous(), size + nbytes
+    shards.append(current)
+    names = []
+    for i, shard in enumerate(shards):
+        name = f"{stem}-{i:03d}.safetensors"
+        tmp = folder / (name + ".tmp")
+        save_file(shard, str(tmp))
+        tmp.replace(folder / name)
+        names.append(name)
+    for old in folder.glob(f"{stem}-*.safetensors"):
+        if old.name not in names:
+            old.unlink()
+    return names
+
+
+def load_sharded(folder: Path, names: list[str]) -> dict:
+    from safetensors.torch import load_file
+
+    tensors = {}
+    for name in names:
+        tensors.update(load_file(str(folder / name)))
+    return tensors
+
+
+def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path | None:
+    """Run (or resume) a training run; the final checkpoint's weights path, or None if
+    ``cfg.max_seconds`` ran out first (resume to continue)."""
     trainer = Trainer(cfg)
     if resume and trainer.resume():
         print(f"resumed {cfg.out} at scale {trainer.scale}, step {trainer.step}")

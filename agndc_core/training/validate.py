@@ -15,7 +15,7 @@ from ..grid import LATTICE_PAD
 from ..labels import crossed_edges
 from ..mc import marching_cubes_lattice
 from ..metrics import evaluate, format_row
-from .data import load_sample, recipe_mesh
+from .data import load_sample, sample_mesh
 
 KEYS = ("cd", "f1", "nc", "ecd", "ef1")
 
@@ -42,7 +42,7 @@ def validate_model(model, folder, *, count: int = 8, n_samples: int = 20_000,
     rows = {"model": [], "mc": []}
     for path in paths:
         sample = load_sample(path)
-        gt_v, gt_f = recipe_mesh(sample["recipe"])
+        gt_v, gt_f = sample_mesh(sample)
         v, f = reconstruct_sample(model, sample, mode)
         rows["model"].append(format_row(evaluate(v, f, gt_v, gt_f, n_samples=n_samples)))
         mc_v, mc_f = marching_cubes_lattice(sample["lattice"])

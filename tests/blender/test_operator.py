@@ -41,7 +41,6 @@ def _mesh(obj):
 
 
 def test_extension_registered(addon):
-    assert addon.install_seconds < 30
     assert hasattr(bpy.types, "VIEW3D_PT_agndc_remesh")
     assert bpy.ops.object.agndc_remesh.get_rna_type().name == "Remesh with AGNDC"
     assert bpy.ops.import_mesh.agndc_grid.get_rna_type() is not None

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from agndc_core.contour import drop_small_components, dual_contour
+from agndc_core.contour import ContourError, drop_small_components, dual_contour
 from agndc_core.contour_naive import dual_contour_naive
 from agndc_core.grid import pad_to_lattice
 from agndc_core.labels import crossed_edges
+from agndc_core.surfacenets import surface_nets_lattice
 
 from conftest import edge_use_counts
 
@@ -27,6 +28,61 @@ def test_vectorised_equals_naive(seed):
     slow = dual_contour_naive(vertex, edge, lattice)
     assert np.array_equal(fast[1], slow[1])  # topology: exact
     np.testing.assert_allclose(fast[0], slow[0], atol=0, rtol=0)
+
+
+def test_dense_grids_with_patches_and_tubes_equal_naive():
+    """Dense random grids hit multi-patch cells and tube faces; fast and naive agree exactly."""
+    rng = np.random.default_rng(11)
+    tubes = 0
+    for _ in range(30):
+        lattice = np.pad(rng.random(rng.integers(2, 7, size=3)) < rng.uniform(0.3, 0.9), 1)
+        vertex = rng.random(lattice.shape + (3,)).astype(np.float32)
+        edge = crossed_edges(lattice)
+        fast = dual_contour(vertex, edge, lattice)
+        slow = dual_contour_naive(vertex, edge, lattice)
+        assert np.array_equal(fast[1], slow[1])
+        np.testing.assert_array_equal(fast[0], slow[0])
+        tubes += len(fast[1]) - 2 * int(edge.sum())  # each tube vertex adds one triangle
+    assert tubes > 0
+
+
+def test_edges_must_be_the_crossing_parity_of_inside():
+    lattice = pad_to_lattice(np.ones((2, 2, 2), bool))
+    edge = crossed_edges(lattice)
+    edge[0, 0, 0, 0] = True
+    with pytest.raises(ContourError, match="1 edges differ"):
+        dual_contour(np.zeros(lattice.shape + (3,)), edge, lattice)
+
+
+def test_single_patch_cells_keep_cell_plus_offset():
+    """A smooth blob has only one-patch cells: same vertices as one vertex per cell."""
+    x, y, z = np.mgrid[:12, :12, :12]
+    lattice = pad_to_lattice((x - 5.5) ** 2 + (y - 5.5) ** 2 + (z - 5.5) ** 2 < 20)
+    vertex = np.random.default_rng(3).random(lattice.shape + (3,)) * 1.4 - 0.2
+    edge = crossed_edges(lattice)
+    manifold = dual_contour(vertex, edge, lattice)
+    per_cell = dual_contour(vertex, edge, None)
+    np.testing.assert_array_equal(manifold[0], per_cell[0])
+    assert len(manifold[1]) == len(per_cell[1])
+
+
+@pytest.mark.parametrize("second", [(1, 1, 0), (1, 1, 1)])
+def test_voxels_touching_at_an_edge_or_corner_stay_apart(second):
+    """Two voxels sharing only an edge (or a corner) give two closed octahedra, 16 vertices."""
+    occupancy = np.zeros((2, 2, 2), bool)
+    occupancy[0, 0, 0] = occupancy[second] = True
+    lattice = pad_to_lattice(occupancy)
+    offsets = surface_nets_lattice(lattice)
+    vertices, faces = dual_contour(offsets, crossed_edges(lattice), lattice)
+    assert len(vertices) == 16 and len(faces) == 24
+    assert np.all(edge_use_counts(faces) == 2)
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    assert mesh.body_count == 2 and mesh.is_winding_consistent and mesh.volume > 0
+    # surface-nets offsets: each patch vertex is that patch's own surface-nets point, so every
+    # vertex sits where a lone voxel's would: 1/6 from its voxel centre along each axis
+    centres = np.argwhere(lattice)
+    l1 = np.abs(vertices[:, None] - centres[None]).sum(axis=2).min(axis=1)
+    np.testing.assert_allclose(l1, 0.5, atol=1e-6)
 
 
 def test_predicted_edges_without_orientation_equal_naive():
@@ -75,9 +131,15 @@ def test_drop_small_components_and_merge():
     assert len(faces) == 2 * 6 * 4 * 4  # only the 4x4x4 block is left: 16 quads per side
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     assert mesh.body_count == 1 and mesh.is_watertight
-    vertex[:] = 0.0  # clipped vertices collapse onto shared corners
+    # cells 2k and 2k + 1 put their vertices on the same x: x offset 1 for even cells, 0 for odd
+    vertex[::2, :, :, 0], vertex[1::2, :, :, 0] = 1.0, 0.0
+    plain = dual_contour(vertex, crossed_edges(lattice), lattice)
     merged = dual_contour(vertex, crossed_edges(lattice), lattice, merge_vertices=True)
-    assert len(merged[0]) <= len(vertices) + 8
+    distinct = np.unique(plain[0], axis=0)
+    assert len(distinct) < len(plain[0])
+    assert np.array_equal(np.unique(merged[0], axis=0), distinct)
+    assert len(merged[1]) < len(plain[1])
+    assert np.all(np.sort(merged[1], axis=1)[:, :-1] != np.sort(merged[1], axis=1)[:, 1:])
 
 
 def test_drop_small_components_reindexes():

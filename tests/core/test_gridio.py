@@ -1,6 +1,9 @@
 """Grid and mesh file I/O: round trips for every format, placement, clear errors for bad files."""
 
+import importlib.util
 import struct
+import tracemalloc
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -98,6 +101,26 @@ def test_nifti_refuses_probability_map(tmp_path):
         load_grid(tmp_path / "p.nii")
 
 
+def test_corrupt_nifti_headers(tmp_path):
+    """nibabel's HeaderDataError is wrapped; claimed sizes are checked before nibabel allocates."""
+    nib = pytest.importorskip("nibabel")
+    data = nib.Nifti1Image(sparse_grid().astype(np.int16), np.eye(4)).to_bytes()
+
+    def corrupt(name, offset, code, *values):
+        out = bytearray(data)
+        struct.pack_into(code, out, offset, *values)
+        (tmp_path / name).write_bytes(bytes(out))
+        return tmp_path / name
+
+    with pytest.raises(GridFileError, match="type.nii: .*data code"):
+        load_grid(corrupt("type.nii", 70, "<h", -1))  # datatype
+    # dim[1..3] at byte 42: 500^3 int16 is 250 MB that the file does not hold
+    path = corrupt("big.nii", 42, "<3h", 500, 500, 500)
+    assert refused_peak_bytes(path, GridFileError, "big.nii: truncated NIfTI") < 1_000_000
+    path = corrupt("huge.nii", 42, "<3h", 32767, 32767, 32767)
+    assert refused_peak_bytes(path, GridError, "huge.nii.*voxels, more than") < 1_000_000
+
+
 # --- npy / npz ----------------------------------------------------------------------------------
 
 
@@ -132,6 +155,49 @@ def test_corrupt_npy_and_npz(tmp_path):
     for name in ("bad.npy", "bad.npz", "array.npz"):
         with pytest.raises(GridFileError, match=name):
             load_grid(tmp_path / name)
+
+
+def npy_bytes(header: str, data: bytes = b"") -> bytes:
+    """A version 1.0 .npy file with a hand-written header dict (padded as numpy pads it)."""
+    text = header.encode("latin1")
+    text += b" " * (-(len(text) + 11) % 64) + b"\n"
+    return b"\x93NUMPY\x01\x00" + struct.pack("<H", len(text)) + text + data
+
+
+def refused_peak_bytes(path, error, match) -> int:
+    """Load ``path``, expect ``error`` matching ``match``; return the peak memory it took."""
+    tracemalloc.start()
+    try:
+        with pytest.raises(error, match=match):
+            load_grid(path)
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
+def test_corrupt_npy_header_is_a_grid_file_error(tmp_path):
+    """numpy's header parser raises TokenError/SyntaxError on these; they must not leak."""
+    cut = "{'descr': '|b1', 'fortran_order': False, 'shape': (6, 5, 7"
+    for index, header in enumerate([cut, cut + "x\x01}", "{'descr': 'O', 'fortran_order': False, "
+                                    "'shape': (2, 2, 2), }"]):
+        (tmp_path / f"h{index}.npy").write_bytes(npy_bytes(header))
+        with pytest.raises(GridFileError, match=f"h{index}.npy"):
+            load_grid(tmp_path / f"h{index}.npy")
+    with zipfile.ZipFile(tmp_path / "inner.npz", "w") as archive:  # the same header in an .npz
+        archive.writestr("occupancy.npy", npy_bytes(cut))
+    with pytest.raises(GridFileError, match="inner.npz: member occupancy.npy"):
+        load_grid(tmp_path / "inner.npz")
+
+
+def test_huge_npy_headers_are_refused_before_allocating(tmp_path):
+    claims = {"huge": "(100000, 100000, 100000)", "wraps": "(4294967296, 4294967296, 1)",
+              "big": "(500, 500, 500)"}  # 1 GB of float64: under the voxel limit, not in the file
+    for name, shape in claims.items():
+        header = f"{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}"
+        (tmp_path / f"{name}.npy").write_bytes(npy_bytes(header, bytes(64)))
+        problem = "truncated" if name == "big" else "voxel limit"
+        peak = refused_peak_bytes(tmp_path / f"{name}.npy", GridFileError, f"{name}.npy.*{problem}")
+        assert peak < 1_000_000
 
 
 # --- binvox -------------------------------------------------------------------------------------
@@ -184,6 +250,15 @@ def test_truncated_binvox(tmp_path):
         load_grid(tmp_path / "no.binvox")
 
 
+def test_binvox_huge_dims_are_refused(tmp_path):
+    """Sizes beyond int64 or whose product wraps int64 (2**32 cubed is 0 mod 2**64)."""
+    for index, dims in enumerate(["4294967296 4294967296 4294967296", "1" + "0" * 30]):
+        path = tmp_path / f"d{index}.binvox"
+        path.write_bytes(f"#binvox 1\ndim {dims}\ndata\n".encode() + bytes([1, 255]))
+        with pytest.raises(GridError, match=f"d{index}.binvox.*more than"):
+            load_grid(path)
+
+
 def test_binvox_refuses_anisotropic_affine(tmp_path):
     grid = VoxelGrid.from_spacing(sparse_grid(), (1.0, 1.0, 2.0))
     with pytest.raises(GridFileError, match="axis-aligned"):
@@ -215,6 +290,10 @@ def test_bad_vox_files(tmp_path):
             load_grid(tmp_path / name)
     with pytest.raises(GridFileError, match="256"):
         save_grid(VoxelGrid(np.zeros((300, 2, 2), bool)), tmp_path / "big.vox")
+    # int32 sizes whose product overflows int64 must still be refused before allocating
+    (tmp_path / "huge.vox").write_bytes(vox_bytes([((2**31 - 1,) * 3, [[0, 0, 0]])]))
+    with pytest.raises(GridError, match="huge.vox.*more than"):
+        load_grid(tmp_path / "huge.vox")
 
 
 # --- paths and errors ---------------------------------------------------------------------------
@@ -263,6 +342,16 @@ def test_mesh_errors(tmp_path):
     (tmp_path / "broken.ply").write_bytes(b"\x00garbage")
     with pytest.raises(GridFileError, match="broken.ply"):
         load_mesh(tmp_path / "broken.ply")
+    (tmp_path / "range.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n")
+    with pytest.raises((GridFileError, MeshError), match="range.obj"):
+        load_mesh(tmp_path / "range.obj")
+    # non-UTF-8 text: trimesh guesses its encoding only with the optional charset_normalizer
+    (tmp_path / "latin1.obj").write_bytes(b"# caf\xe9\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    if importlib.util.find_spec("charset_normalizer") is None:
+        with pytest.raises(GridFileError, match="latin1.obj.*not UTF-8"):
+            load_mesh(tmp_path / "latin1.obj")
+    else:
+        assert load_mesh(tmp_path / "latin1.obj")[1].shape == (1, 3)
     with pytest.raises(GridFileError, match="missing.stl"):
         load_mesh(tmp_path / "missing.stl")
     with pytest.raises(GridFileError, match="unsupported"):

@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import randomise_outputs
+
 from agndc_core.errors import ModelError
 from agndc_core.inference import BAND_TOLERANCE
 from agndc_core.labels import crossed_edges, surface_cells
@@ -20,7 +22,7 @@ def blob_lattice(shape=(32, 32, 24)) -> np.ndarray:
 
 def model(seed=0, **kw) -> AGNDCCascade:
     torch.manual_seed(seed)
-    return AGNDCCascade(AGNDCConfig(width=8, **kw)).eval()
+    return randomise_outputs(AGNDCCascade(AGNDCConfig(width=8, **kw))).eval()
 
 
 # ---------------------------------------------------------------------- config
@@ -143,3 +145,48 @@ def test_band_evaluation_is_differentiable():
     grads = [p.grad for p in net.nets[0].parameters()]
     assert all(g is not None for g in grads)
     assert sum(float(g.abs().sum()) for g in grads) > 0
+
+
+# ---------------------------------------------------------------------- surface nets prior
+
+
+@pytest.mark.parametrize("kw", [{}, {"levels": 0, "use_attention": False, "use_snake": False,
+                                     "use_dffm": False, "use_crpm": False}])
+def test_untrained_network_returns_surface_nets(kw):
+    """Zero-initialised vertex heads + the prior: before any training the finest scale is
+    exactly surface nets on every surface cell, dense and band alike."""
+    from agndc_core.surfacenets import surface_nets_lattice
+
+    torch.manual_seed(0)
+    net = AGNDCCascade(AGNDCConfig(width=8, **kw)).eval()
+    lattice = blob_lattice((24, 20, 16))
+    surface = surface_cells(crossed_edges(lattice))
+    expected = surface_nets_lattice(lattice)[surface]
+    with torch.inference_mode():
+        dense = net(torch.from_numpy(lattice)[None])[0][0].permute(1, 2, 3, 0)
+        band = net.forward_band(lattice)[0]
+    np.testing.assert_allclose(dense[..., :3][surface].numpy(), expected, atol=1e-6)
+    np.testing.assert_allclose(band[..., :3][surface].numpy(), expected, atol=1e-6)
+    # and the snakes start straight
+    for module in net.modules():
+        if hasattr(module, "offset") and hasattr(module, "taps"):
+            assert float(module.offset.weight.abs().sum()) == 0.0
+
+
+def test_without_the_prior_an_untrained_network_is_at_cell_centres():
+    torch.manual_seed(0)
+    net = AGNDCCascade(AGNDCConfig(width=8, surface_nets_prior=False)).eval()
+    lattice = blob_lattice((16, 16, 16))
+    with torch.inference_mode():
+        p0 = net(torch.from_numpy(lattice)[None])[0][0]
+    torch.testing.assert_close(p0[:3], torch.full_like(p0[:3], 0.5))
+
+
+def test_edge_loss_can_be_left_out():
+    pred = torch.randn(1, 6, 4, 4, 4, requires_grad=True)
+    vertex, edge = torch.rand(1, 4, 4, 4, 3), torch.rand(1, 4, 4, 4, 3) > 0.5
+    surface = torch.rand(1, 4, 4, 4) > 0.5
+    loss, parts = AGNDCLoss(train_edges=False)(pred, vertex, edge, surface)
+    loss.backward()
+    assert parts["edge"] > 0 and float(pred.grad[:, 3:].abs().sum()) == 0.0
+    assert float(pred.grad[:, :3].abs().sum()) > 0

@@ -1,11 +1,15 @@
-"""The results report: its voxel picture geometry and a whole (small) report end to end."""
+"""The results report: its voxel picture geometry, the MC→oracle headroom shares and a whole
+(small) report end to end."""
+
+import math
 
 import numpy as np
 import trimesh
 
 from agndc_core.checkpoint import default_checkpoint_path
+from agndc_core.evaluate import headroom_line, headroom_shares
 from agndc_core.grid import VoxelGrid
-from agndc_core.report import build_report, voxel_faces
+from agndc_core.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 
 
 def test_voxel_faces_of_a_block_is_its_closed_box():
@@ -22,19 +26,56 @@ def test_voxel_faces_of_a_block_is_its_closed_box():
     assert np.allclose(mesh.bounds[0], [1.0 + 0.25, 2.0 + 0.25, 3.0 + 0.75])
 
 
+def summary(method, cd, ef1):
+    return {"method": method, "cd": cd, "f1": 0.5, "nc": 0.9, "ecd": 0.1, "ef1": ef1}
+
+
+def test_headroom_shares_from_the_means():
+    summaries = [summary("mc", 10.0, 0.2), summary("a", 6.0, 0.35), summary("b", 12.0, 0.1),
+                 summary("c", math.nan, 0.2), summary("oracle", 2.0, 0.7)]
+    shares = headroom_shares(summaries)
+    assert list(shares) == ["mc", "a", "b", "c", "oracle"]
+    assert shares["mc"] == {"cd": 0.0, "ef1": 0.0}
+    assert shares["oracle"] == {"cd": 100.0, "ef1": 100.0}
+    assert np.isclose(shares["a"]["cd"], 50.0) and np.isclose(shares["a"]["ef1"], 30.0)
+    assert np.isclose(shares["b"]["cd"], -25.0) and np.isclose(shares["b"]["ef1"], -20.0)
+    assert math.isnan(shares["c"]["cd"]) and shares["c"]["ef1"] == 0.0
+    line = headroom_line(summaries)
+    assert line.startswith("Share of the MC→oracle headroom")
+    assert "CD: mc 0.0 %, a 50.0 %, b -25.0 %, c –, oracle 100.0 %" in line
+    assert "EF1: mc 0.0 %, a 30.0 %, b -20.0 %, c 0.0 %, oracle 100.0 %" in line
+    # without both anchors there is nothing to share
+    assert headroom_shares(summaries[:-1]) == {} and headroom_line(summaries[1:]) == ""
+
+
+def test_rotated_box_is_a_closed_turned_box():
+    vertices, faces = rotated_box()
+    mesh = trimesh.Trimesh(vertices, faces)
+    assert mesh.is_watertight and np.isclose(mesh.volume, 1.0 * 0.7 * 0.5)
+    assert not np.allclose(np.abs(mesh.face_normals).max(axis=1), 1.0)  # off the axes
+
+
 def test_report_on_a_small_folder(tmp_path):
     folder = tmp_path / "meshes"
     folder.mkdir()
     trimesh.creation.box((1.0, 0.6, 0.4)).export(folder / "box.stl")
     trimesh.creation.icosphere(3, 0.5).export(folder / "ball.obj")
     out = build_report(folder, tmp_path / "report" / "results.md", resolutions=(20,),
-                       methods=("mc", "undc", "agndc", "oracle"), n_samples=5_000,
+                       methods=REPORT_METHODS, n_samples=5_000,
                        figure_shapes=("box",), command="agndc report test",
                        ablations={"w/o nothing": default_checkpoint_path("agndc")})
     text = out.read_text()
     assert "`agndc report test`" in text
     assert "## 20³: all shapes" in text and "| oracle | 2 |" in text
+    for method in ("mc_taubin", "surfacenets"):
+        assert f"| {method} | 2 |" in text
     assert "AGNDC against mc: CD " in text and "AGNDC against undc: CD " in text
+    assert "AGNDC against surfacenets: CD " in text
+    headroom = [line for line in text.splitlines() if line.startswith("Share of the MC→oracle")]
+    assert len(headroom) == 1  # one resolution
+    for method in REPORT_METHODS:
+        assert f" {method} " in headroom[0]
+    assert "CD: mc 0.0 %" in headroom[0] and "; EF1: mc " in headroom[0]
     # an "ablation" that is the shipped checkpoint itself reproduces the agndc line exactly
     ablation = text.split("## Ablation")[1].split("\n\n")[1].splitlines()
     lines = {line.split(" | ")[0].strip("| "): line.split(" | ")[-5:] for line in ablation[2:]}

@@ -1,57 +1,128 @@
-"""Tests of agndc_core.shapes: validity, normalisation, determinism and diversity."""
+"""Tests of agndc_core.shapes: validity, normalisation, determinism, family mix and diversity."""
+
+import time
 
 import numpy as np
 import pytest
 import trimesh
 
-from agndc_core.shapes import generate_dataset, generate_shape
+from agndc_core.shapes import (
+    AXIS_ALIGNED_FRACTION,
+    FAMILIES,
+    FAMILY_WEIGHTS,
+    generate_dataset,
+    generate_shape,
+    is_axis_aligned,
+    shape_family,
+)
+from agndc_core.training.data import RESOLUTION_RANGE, sample_recipe
 
-SEEDS = range(20)
+#: the first few seeds of every family, so each family's builders are exercised
+PER_FAMILY = 6
+SEEDS = sorted(s for fam in FAMILIES
+               for s in [s for s in range(300) if shape_family(s) == fam][:PER_FAMILY])
+#: seeds over which the (cheap) family and alignment draws are counted
+N_COUNT = 4000
+#: allowed deviation of a share from its target over N_COUNT seeds (~4 standard deviations)
+SHARE_TOL = 0.03
 #: a face normal counts as axis-aligned when its largest component is within this of 1
 AXIS_TOL = 1e-6
+#: the issue's budget: average seconds to generate one shape
+MEAN_SECONDS = 0.5
 
 
 @pytest.fixture(scope="module")
 def meshes():
     """seed -> trimesh.Trimesh (unprocessed, so the generator's arrays are tested as-is)."""
-    return {seed: trimesh.Trimesh(*generate_shape(seed), process=False) for seed in SEEDS}
+    out, t0 = {}, time.perf_counter()
+    for seed in SEEDS:
+        out[seed] = trimesh.Trimesh(*generate_shape(seed), process=False)
+    out["seconds"] = (time.perf_counter() - t0) / len(SEEDS)
+    return out
 
 
 @pytest.mark.parametrize("seed", SEEDS)
-def test_watertight_normalised_solid(meshes, seed):
+def test_watertight_outward_normalised_solid(meshes, seed):
     mesh = meshes[seed]
     assert mesh.vertices.dtype == np.float64 and mesh.faces.dtype == np.int64
     assert len(mesh.faces) >= 12
-    assert mesh.is_watertight and mesh.is_volume
-    assert mesh.volume > 0
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.is_volume
+    assert mesh.volume > 0  # consistent winding and positive volume: outward normals
     lo, hi = mesh.bounds
     assert (hi - lo).max() == pytest.approx(1.0, abs=1e-6)
     np.testing.assert_allclose((lo + hi) / 2, 0.0, atol=1e-9)
 
 
-def test_deterministic_and_seed_dependent():
-    v1, f1 = generate_shape(7)
-    v2, f2 = generate_shape(7)
+def test_generation_is_fast(meshes):
+    assert meshes["seconds"] < MEAN_SECONDS
+
+
+@pytest.mark.parametrize("family", FAMILIES)
+def test_deterministic_and_seed_dependent(family):
+    seed, other = [s for s in range(300) if shape_family(s) == family][:2]
+    v1, f1 = generate_shape(seed)
+    v2, f2 = generate_shape(seed)
     np.testing.assert_array_equal(v1, v2)
     np.testing.assert_array_equal(f1, f2)
-    v3, f3 = generate_shape(8)
+    v3, _ = generate_shape(other)
     assert v1.shape != v3.shape or not np.array_equal(v1, v3)
 
 
+def test_family_and_alignment_shares():
+    families = np.array([shape_family(s) for s in range(N_COUNT)])
+    for family, weight in zip(FAMILIES, FAMILY_WEIGHTS):
+        assert np.mean(families == family) == pytest.approx(weight, abs=SHARE_TOL), family
+    aligned = np.mean([is_axis_aligned(s) for s in range(N_COUNT)])
+    assert aligned == pytest.approx(AXIS_ALIGNED_FRACTION, abs=SHARE_TOL)
+
+
+def test_recipes_rotate_once_and_draw_log_uniform_resolutions():
+    recipes = [sample_recipe(s) for s in range(N_COUNT // 2)]
+    # the generator rotates the non-aligned shapes itself: recipes never add a second rotation
+    assert all(np.array_equal(r["rotation"], np.eye(3)) for r in recipes)
+    aligned = np.mean([r["axis_aligned"] for r in recipes])
+    assert aligned == pytest.approx(AXIS_ALIGNED_FRACTION, abs=1.5 * SHARE_TOL)
+    assert all(r["family"] == shape_family(r["seed"]) for r in recipes)
+    res = np.array([r["resolution"] for r in recipes])
+    lo, hi = RESOLUTION_RANGE
+    assert res.min() == lo and res.max() == hi
+    mid = np.sqrt(lo * hi)  # log-uniform: half the draws on each side of the geometric mean
+    assert np.mean(res < mid) == pytest.approx(0.5, abs=0.05)
+    # an extra rotation only for generator-aligned shapes
+    turned = [r for r in (sample_recipe(s, rotate_fraction=1.0) for s in range(200))
+              if not np.array_equal(r["rotation"], np.eye(3))]
+    assert turned and all(is_axis_aligned(r["seed"]) and not r["axis_aligned"] for r in turned)
+
+
+def _on_grid_share(mesh) -> float:
+    """Share of the surface area whose normal is a grid axis."""
+    on_grid = np.abs(mesh.face_normals).max(axis=1) > 1 - AXIS_TOL
+    return mesh.area_faces[on_grid].sum() / mesh.area
+
+
 def test_diversity(meshes):
-    ms = list(meshes.values())
+    ms = [meshes[s] for s in SEEDS]
     n_comp = [len(m.split(only_watertight=False)) for m in ms]
     # genus summed over components from the Euler characteristic: chi = sum(2 - 2 g_i)
     genus = [(2 * c - m.euler_number) // 2 for m, c in zip(ms, n_comp)]
-    assert sum(g > 0 for g in genus) >= 3  # through-holes, tubes
+    assert sum(g > 0 for g in genus) >= 3  # through-holes, tubes, tori
     assert sum(c > 1 for c in n_comp) >= 1  # several disjoint parts
-    # share of the surface area whose normal is a grid axis: 0 for a freely rotated shape,
-    # most of it for one left on the axes (cylinders and chamfers keep it below 1)
-    on_grid = [m.area_faces[np.abs(m.face_normals).max(axis=1) > 1 - AXIS_TOL].sum() / m.area
-               for m in ms]
-    assert sum(f == 0 for f in on_grid) >= 10  # freely rotated shapes
-    assert sum(f > 0.5 for f in on_grid) >= 2  # and some left on the grid axes
-    assert len({len(m.faces) for m in ms}) >= 15  # not the same few templates
+    on_grid = np.array([_on_grid_share(m) for m in ms])
+    aligned = np.array([is_axis_aligned(s) for s in SEEDS])
+    # a freely rotated shape has no face on the grid axes; an aligned CAD part mostly has
+    assert np.all(on_grid[~aligned] < 0.01)
+    cad_aligned = aligned & np.array([shape_family(s) == "cad" for s in SEEDS])
+    assert np.any(on_grid[cad_aligned] > 0.5)
+    assert len({len(m.faces) for m in ms}) >= 0.8 * len(ms)  # not the same few templates
+
+
+@pytest.mark.parametrize("family", ["smooth", "organic"])
+def test_curved_families_have_no_large_flat_faces(meshes, family):
+    for seed in (s for s in SEEDS if shape_family(s) == family):
+        mesh = meshes[seed]
+        # curved surfaces are finely tessellated: no triangle carries a big share of the area
+        assert len(mesh.faces) > 500
+        assert np.median(mesh.area_faces) / mesh.area < 1e-3
 
 
 def test_generate_dataset_matches_generate_shape():

@@ -1,0 +1,198 @@
+"""Every contoured binary grid is a closed, oriented 2-manifold with the expected components.
+
+Connectivity (the rule of ``contour.py`` and of scikit-image's Lorensen table used by ``mc.py``):
+inside voxels are 6-connected, outside voxels 18-connected. The expected number of closed surfaces
+is computed independently with ``scipy.ndimage.label``: one surface per touching pair (sharing a
+lattice edge) of a 6-connected inside region and an 18-connected outside region, on a grid padded
+with empty voxels so the outside around it is one region. Surfaces face away from the solid, so
+the surface of a cavity (an outside region that does not reach the border) has negative signed
+volume: there is exactly one such surface per cavity, every other surface has positive volume.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from agndc_core import contour
+from agndc_core.contour import dual_contour, face_components
+from agndc_core.labels import crossed_edges
+from agndc_core.mc import marching_cubes_lattice
+from agndc_core.surfacenets import surface_nets_lattice
+
+N_GRIDS = 520
+SIX, EIGHTEEN = ndimage.generate_binary_structure(3, 1), ndimage.generate_binary_structure(3, 2)
+
+
+def random_grids(count=N_GRIDS, seed=14):
+    """Seeded padded lattices: sizes 3..24 per axis (mostly small), densities 0.05..0.95."""
+    rng = np.random.default_rng(seed)
+    for n in range(count):
+        high = 25 if n % 10 == 0 else 11
+        shape = rng.integers(3, high, size=3)
+        density = rng.uniform(0.05, 0.95)
+        yield n, np.pad(rng.random(shape) < density, 1)
+
+
+def topology_violations(vertices, faces) -> dict:
+    """Counts of defects of a closed oriented 2-manifold triangle mesh (all 0 when it is one)."""
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    a, b, c = faces.T
+    half = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)  # directed edges a->b, b->c, c->a
+    _, undirected = np.unique(np.sort(half, axis=1), axis=0, return_counts=True)
+    _, directed = np.unique(half, axis=0, return_counts=True)
+    used = np.zeros(len(vertices), dtype=bool)
+    used[faces.reshape(-1)] = True
+    fans = _fans_per_vertex(faces, len(vertices))
+    return {
+        "degenerate_faces": int(np.sum((a == b) | (b == c) | (a == c))),
+        "edges_not_in_two_faces": int(np.sum(undirected != 2)),
+        "edges_same_direction_twice": int(np.sum(directed != 1)),  # inconsistent orientation
+        "vertices_not_one_fan": int(np.sum(fans[used] != 1)),
+        "unused_vertices": int(np.sum(~used)),
+    }
+
+
+def _fans_per_vertex(faces, n_vertices) -> np.ndarray:
+    """(V,) number of fans: cycles of the link (face (a, b, c) gives a the link edge b - c)."""
+    centre = faces.T.reshape(-1)
+    start = faces[:, [1, 2, 0]].T.reshape(-1)
+    end = faces[:, [2, 0, 1]].T.reshape(-1)
+    keys, inverse = np.unique(np.concatenate([centre * n_vertices + start,
+                                              centre * n_vertices + end]), return_inverse=True)
+    m = len(centre)
+    graph = coo_matrix((np.ones(m), (inverse[:m], inverse[m:])), shape=(len(keys),) * 2)
+    _, label = connected_components(graph, directed=False)
+    owner = keys // n_vertices
+    fan_keys = np.unique(owner * len(keys) + label)
+    return np.bincount(fan_keys // len(keys), minlength=n_vertices)
+
+
+def component_volumes(vertices, faces) -> np.ndarray:
+    """(K,) signed volume of each connected component."""
+    if len(faces) == 0:
+        return np.zeros(0)
+    triangles = vertices[faces]
+    volume = np.einsum("ij,ij->i", triangles[:, 0],
+                       np.cross(triangles[:, 1], triangles[:, 2])) / 6.0
+    return np.bincount(face_components(faces, len(vertices)), volume)
+
+
+def expected_surfaces(lattice) -> tuple[int, int]:
+    """(surfaces, cavities) implied by 6-connected inside and 18-connected outside."""
+    inner, _ = ndimage.label(lattice, SIX)
+    outer, n_outer = ndimage.label(~lattice, EIGHTEEN)
+    pairs = []
+    for axis in range(3):
+        low = [slice(None)] * 3
+        high = [slice(None)] * 3
+        low[axis], high[axis] = slice(0, -1), slice(1, None)
+        a_in = lattice[tuple(low)]
+        crossed = a_in != lattice[tuple(high)]
+        region_in = np.where(a_in, inner[tuple(low)], inner[tuple(high)])[crossed]
+        region_out = np.where(a_in, outer[tuple(high)], outer[tuple(low)])[crossed]
+        pairs.append(region_in.astype(np.int64) * (n_outer + 1) + region_out)
+    surfaces = len(np.unique(np.concatenate(pairs)))
+    return surfaces, n_outer - 1  # the padded border is one outside region, the rest cavities
+
+
+def check_mesh(vertices, faces, lattice, *, signs: bool) -> dict:
+    """All defect counts of one output, including components and (optionally) volume signs."""
+    found = topology_violations(vertices, faces)
+    surfaces, cavities = expected_surfaces(lattice)
+    volumes = component_volumes(vertices, faces)
+    found["wrong_component_count"] = int(len(volumes) != surfaces)
+    if signs:
+        bad_sign = np.sum(volumes < 0) != cavities or np.sum(volumes > 0) != surfaces - cavities
+        found["wrong_volume_signs"] = int(bad_sign)
+    return found
+
+
+def run_property(method: str) -> tuple[int, dict]:
+    totals: dict = {}
+    grids = 0
+    for n, lattice in random_grids():
+        edge = crossed_edges(lattice)
+        if method == "mc":
+            meshes = [(marching_cubes_lattice(lattice), True)]
+        else:
+            rng = np.random.default_rng(n)
+            random = rng.random(lattice.shape + (3,))
+            meshes = [(dual_contour(surface_nets_lattice(lattice), edge, lattice), True),
+                      # arbitrary positions keep the topology; only geometry (signs) may flip
+                      (dual_contour(random, edge, lattice), False)]
+        for (vertices, faces), signs in meshes:
+            for key, value in check_mesh(vertices, faces, lattice, signs=signs).items():
+                totals[key] = totals.get(key, 0) + value
+        grids += 1
+    return grids, totals
+
+
+@pytest.mark.parametrize("method", ["dual_contour", "mc"])
+def test_random_grids_give_closed_oriented_manifolds(method):
+    start = time.perf_counter()
+    grids, totals = run_property(method)
+    print(f"{method}: {grids} grids in {time.perf_counter() - start:.1f} s, violations {totals}")
+    assert grids >= 500
+    assert all(count == 0 for count in totals.values()), totals
+
+
+def test_patch_table_patches_are_disks():
+    """Every patch of every case has exactly one boundary loop, so one vertex can span it.
+
+    Boundary loops are traced independently of ``cell_patches``: on each cell face the crossed
+    edges are paired into segments (an ambiguous face pairs the edges at each inside corner).
+    """
+    face_edges = contour._face_edges()
+    for config in range(256):
+        patch = contour.PATCH[config]
+        inside = [(config >> k) & 1 for k in range(8)]
+        label = list(range(12))
+
+        def find(i):
+            while label[i] != i:
+                i = label[i]
+            return i
+
+        for face, ring in zip(face_edges, contour.CELL_FACES):
+            crossed = [e for e in face if patch[e] >= 0]
+            if len(crossed) == 2:
+                label[find(crossed[0])] = find(crossed[1])
+            elif len(crossed) == 4:
+                for corner in ring:
+                    if inside[corner]:
+                        pair = [e for e in face if corner in contour.CELL_EDGES[e]]
+                        label[find(pair[0])] = find(pair[1])
+        loops = {}
+        for e in np.flatnonzero(patch >= 0):
+            loops.setdefault(int(patch[e]), set()).add(find(int(e)))
+        assert all(len(roots) == 1 for roots in loops.values()), config
+        roots = [root for roots in loops.values() for root in roots]
+        assert len(set(roots)) == len(roots), config  # distinct patches never share a loop
+
+
+def test_no_cell_joins_two_faces_at_one_edge():
+    """So no triangle of a quad ever holds two tube vertices (``_split_tube_sides``)."""
+    face_edges = [set(edges) for edges in contour._face_edges()]
+    for config in np.flatnonzero(contour.FACE_JOINED.any(axis=1)):
+        joined = np.flatnonzero(contour.FACE_JOINED[config])
+        for i in joined:
+            for j in joined:
+                assert i == j or not (face_edges[i] & face_edges[j]), config
+
+
+def test_tube_face_gets_two_vertices():
+    """Inside corners of a face joined around through both cells: the outside threads a ring."""
+    lattice = np.zeros((5, 4, 4), bool)
+    for x, y, z in [(0, 0, 0), (0, 1, 1), (1, 0, 0), (1, 1, 0), (1, 1, 1),
+                    (-1, 0, 0), (-1, 1, 0), (-1, 1, 1)]:
+        lattice[x + 2, y + 1, z + 1] = True
+    edge = crossed_edges(lattice)
+    vertices, faces = dual_contour(np.full(lattice.shape + (3,), 0.5), edge, lattice)
+    assert len(faces) == 2 * edge.sum() + 4  # one triangle of each of the face's 4 quads split
+    assert not any(check_mesh(vertices, faces, lattice, signs=True).values())
+    # on the face x = 2, halfway between each inside corner and the face centre
+    np.testing.assert_array_equal(vertices[-2:], [[2, 1.25, 1.25], [2, 1.75, 1.75]])
