@@ -14,13 +14,12 @@ import time
 import numpy as np
 import pytest
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from agndc_core import contour
 from agndc_core.contour import dual_contour, face_components
 from agndc_core.labels import crossed_edges
 from agndc_core.mc import marching_cubes_lattice
+from agndc_core.meshcheck import topology_violations
 from agndc_core.surfacenets import surface_nets_lattice
 
 N_GRIDS = 520
@@ -35,40 +34,6 @@ def random_grids(count=N_GRIDS, seed=14):
         shape = rng.integers(3, high, size=3)
         density = rng.uniform(0.05, 0.95)
         yield n, np.pad(rng.random(shape) < density, 1)
-
-
-def topology_violations(vertices, faces) -> dict:
-    """Counts of defects of a closed oriented 2-manifold triangle mesh (all 0 when it is one)."""
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    a, b, c = faces.T
-    half = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)  # directed edges a->b, b->c, c->a
-    _, undirected = np.unique(np.sort(half, axis=1), axis=0, return_counts=True)
-    _, directed = np.unique(half, axis=0, return_counts=True)
-    used = np.zeros(len(vertices), dtype=bool)
-    used[faces.reshape(-1)] = True
-    fans = _fans_per_vertex(faces, len(vertices))
-    return {
-        "degenerate_faces": int(np.sum((a == b) | (b == c) | (a == c))),
-        "edges_not_in_two_faces": int(np.sum(undirected != 2)),
-        "edges_same_direction_twice": int(np.sum(directed != 1)),  # inconsistent orientation
-        "vertices_not_one_fan": int(np.sum(fans[used] != 1)),
-        "unused_vertices": int(np.sum(~used)),
-    }
-
-
-def _fans_per_vertex(faces, n_vertices) -> np.ndarray:
-    """(V,) number of fans: cycles of the link (face (a, b, c) gives a the link edge b - c)."""
-    centre = faces.T.reshape(-1)
-    start = faces[:, [1, 2, 0]].T.reshape(-1)
-    end = faces[:, [2, 0, 1]].T.reshape(-1)
-    keys, inverse = np.unique(np.concatenate([centre * n_vertices + start,
-                                              centre * n_vertices + end]), return_inverse=True)
-    m = len(centre)
-    graph = coo_matrix((np.ones(m), (inverse[:m], inverse[m:])), shape=(len(keys),) * 2)
-    _, label = connected_components(graph, directed=False)
-    owner = keys // n_vertices
-    fan_keys = np.unique(owner * len(keys) + label)
-    return np.bincount(fan_keys // len(keys), minlength=n_vertices)
 
 
 def component_volumes(vertices, faces) -> np.ndarray:

@@ -84,3 +84,34 @@ def test_report_on_a_small_folder(tmp_path):
     assert (out.parent / "results_rows" / "w_o_nothing.md").is_file()
     assert (out.parent / "results_rows" / "rows.csv").is_file()
     assert (out.parent / "results_shapes.png").stat().st_size > 10_000
+
+
+def test_eval_uses_the_checkpoint_it_is_given(tmp_path, capsys):
+    """``agndc eval --checkpoint agndc=PATH`` evaluates those weights, not the shipped ones: an
+    untrained prior network is exactly surface nets, so its rows equal surfacenets' rows."""
+    import csv
+
+    import pytest
+    import torch
+
+    from agndc_core.checkpoint import save_checkpoint
+    from agndc_core.cli import main
+    from agndc_core.nn import AGNDCCascade, AGNDCConfig
+
+    torch.manual_seed(0)
+    weights = save_checkpoint(AGNDCCascade(AGNDCConfig(width=8)), tmp_path / "untrained",
+                              training={}, metrics={})
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    trimesh.creation.icosphere(3, 0.5).export(folder / "ball.obj")
+    out = tmp_path / "eval"
+    assert main(["eval", str(folder), "-o", str(out), "--methods", "agndc,surfacenets",
+                 "--res", "24", "--samples", "5000", "--checkpoint",
+                 f"agndc={weights}"]) == 0
+    rows = {r["method"]: r for r in csv.DictReader(open(out / "rows.csv"))}
+    assert rows["agndc"]["faces"] == rows["surfacenets"]["faces"]
+    assert float(rows["agndc"]["cd"]) == pytest.approx(float(rows["surfacenets"]["cd"]),
+                                                       rel=1e-6)
+    # only learned methods take weights: a clear error (exit status 2), not a traceback
+    assert main(["eval", str(folder), "--checkpoint", "mc=x"]) == 2
+    assert "--checkpoint wants" in capsys.readouterr().err

@@ -134,17 +134,20 @@ def _held_out_loss(trainer, steps=range(10_000, 10_006)) -> float:
 
 
 def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_path):
-    """An untrained cascade *is* surface nets (zero vertex heads + prior); a short run must do
-    better than that on batches it never saw."""
+    """An untrained network *is* surface nets (zero vertex heads + prior); a short run must do
+    clearly better than that on batches it never saw. The single-scale plain-conv network
+    (UNDC) learns fastest per second, so it keeps this test short."""
     from agndc_core.checkpoint import load_checkpoint
 
-    cfg = _config(data_dir, tmp_path / "run", steps=(60, 10, 10))
+    cfg = _config(data_dir, tmp_path / "run", steps=(200,))
+    cfg.model = dict(width=8, levels=0, use_attention=False, use_snake=False, use_dffm=False,
+                     use_crpm=False)
     trainer = Trainer(cfg)
     before = _held_out_loss(trainer)
     path = trainer.run(progress=False)
-    assert _held_out_loss(trainer) < 0.95 * before
+    assert _held_out_loss(trainer) < 0.85 * before
     model, meta = load_checkpoint(path)
-    assert meta["training"]["steps_per_scale"] == [60, 10, 10]
+    assert meta["training"]["steps_per_scale"] == [200]
     assert meta["training"]["data"]["samples"] == 3
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["done"]
@@ -202,7 +205,7 @@ def test_warm_start_from_a_checkpoint_without_the_prior(data_dir, tmp_path):
     cfg.init = str(path)
     new = Trainer(cfg).model
     head = new.nets[0].crpm.head.fc2
-    assert float(head.weight[:3].abs().sum()) == 0.0 and torch.all(head.bias[:3] == 0.5)
+    assert int(torch.count_nonzero(head.weight[:3])) == 0 and torch.all(head.bias[:3] == 0.5)
     torch.testing.assert_close(head.weight[3:], old.nets[0].crpm.head.fc2.weight[3:])
     torch.testing.assert_close(new.nets[1].fdm.convs[0].weight, old.nets[1].fdm.convs[0].weight)
 
