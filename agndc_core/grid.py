@@ -89,8 +89,8 @@ class VoxelGrid:
 
     def index_to_world(self, points_nx3: np.ndarray) -> np.ndarray:
         """Map (N, 3) index coordinates (voxel centres at integers) to (N, 3) world coordinates."""
-        points = np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3)
-        return points @ self.affine[:3, :3].T + self.affine[:3, 3]
+        return lattice_to_world(np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3)
+                                + LATTICE_PAD, self.affine)
 
     def world_to_index(self, points_nx3: np.ndarray) -> np.ndarray:
         """Inverse of ``index_to_world``."""
@@ -161,6 +161,20 @@ def scale_lattice(level: int) -> tuple[float, float]:
     """
     spacing = float(2**level)
     return (spacing - 1.0) / 2.0, spacing
+
+
+def occupancy_pyramid(lattice: np.ndarray, levels: int) -> list[np.ndarray]:
+    """[G_0, ..., G_levels]: the lattice and its OR-pooled coarser scales (``pool_occupancy``)."""
+    grids = [np.asarray(lattice, dtype=bool)]
+    for _ in range(levels):
+        grids.append(pool_occupancy(grids[-1]))
+    return grids
+
+
+def lattice_to_world(points_nx3: np.ndarray, affine: np.ndarray) -> np.ndarray:
+    """(N, 3) padded-lattice coordinates -> (N, 3) world coordinates (point p = voxel p - pad)."""
+    points = np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3) - LATTICE_PAD
+    return points @ np.asarray(affine)[:3, :3].T + np.asarray(affine)[:3, 3]
 
 
 def pool_occupancy(lattice: np.ndarray) -> np.ndarray:

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from .errors import AGNDCError, CancelledError, GridError
-from .grid import pool_occupancy
+from .grid import occupancy_pyramid
 
 #: band vs dense agreement (absolute, network output units) where the band covers the network's
 #: receptive field: float32 rounding of a different summation order only
@@ -91,9 +91,7 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
 def _predict_band(model, lattice: np.ndarray, radius, tile: int, report) -> torch.Tensor:
     """(X, Y, Z, 6) scale-0 prediction by band evaluation, tiled scale by scale."""
     levels, cfg = model.levels, model.config
-    grids = [lattice]
-    for _ in range(levels):
-        grids.append(pool_occupancy(grids[-1]))
+    grids = occupancy_pyramid(lattice, levels)
     periods = model.torus_periods
     plans = []
     for s in range(levels + 1):

@@ -36,7 +36,7 @@ import numpy as np
 
 from .contour import dual_contour
 from .errors import AGNDCError, CancelledError, MeshError
-from .grid import LATTICE_PAD, VoxelGrid, pad_to_lattice
+from .grid import VoxelGrid, lattice_to_world, pad_to_lattice
 from .labels import crossed_edges
 
 METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle")
@@ -127,7 +127,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
-    world = grid.index_to_world(vertices - LATTICE_PAD)
+    world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
         progress(1.0, "done")

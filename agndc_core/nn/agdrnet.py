@@ -21,7 +21,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ..errors import ModelError
-from ..grid import pool_occupancy
+from ..grid import occupancy_pyramid
 from ..surfacenets import CENTRE, surface_nets_offsets
 from .band_ops import BandOps, scale_ops, snake_margin, torus_periods
 from .config import AGNDCConfig
@@ -224,9 +224,7 @@ class AGNDCCascade(nn.Module):
             [P_0, ..., P_levels] channel-last (X_s, Y_s, Z_s, 6); far from the surface (beyond
             the band) each holds the far-field value.
         """
-        grids = [np.asarray(lattice, dtype=bool)]
-        for _ in range(self.levels):
-            grids.append(pool_occupancy(grids[-1]))
+        grids = occupancy_pyramid(lattice, self.levels)
         preds, coarser = [None] * (self.levels + 1), None
         for s in reversed(range(self.levels + 1)):
             rows, ops = self.band_scale(s, grids[s], coarser, radius)

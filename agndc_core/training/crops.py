@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..grid import pool_occupancy
+from ..grid import occupancy_pyramid
 
 
 def take(array: np.ndarray, origin, size) -> np.ndarray:
@@ -67,21 +67,13 @@ def transform_quadric(quadric: np.ndarray, perm, flips) -> np.ndarray:
     return np.stack([full[..., r, c] for r, c in QUADRIC_ENTRIES], axis=-1)
 
 
-def sample_pyramid(lattice: np.ndarray, levels: int) -> list[np.ndarray]:
-    """Input occupancy G_0..G_levels of a padded scale-0 lattice (OR pooling, as at inference)."""
-    grids = [np.asarray(lattice, dtype=bool)]
-    for _ in range(levels):
-        grids.append(pool_occupancy(grids[-1]))
-    return grids
-
-
 def make_crop(sample: dict, grids: list[np.ndarray], s: int, size: int, origin,
               perm, flips) -> dict:
     """One augmented crop of scale ``s``.
 
     Args:
         sample: arrays of ``data.load_sample`` (labels ``vertex{s}``, ``edge{s}``, ``surface{s}``).
-        grids: ``sample_pyramid`` of the sample's lattice.
+        grids: ``grid.occupancy_pyramid`` of the sample's lattice.
         s: trained scale; size: crop edge at scale s; origin: (3,) crop start at scale s.
         perm: axis permutation (3,); flips: (3,) bool, applied after the permutation.
 
@@ -211,11 +203,7 @@ class SparseSample:
         """
         lo, size = np.asarray(lo), np.asarray(size)
         k = 2 ** s
-        fine = take(self.lattice(), lo * k, size * k)
-        grids = [fine]
-        for _ in range(self.levels):
-            grids.append(pool_occupancy(grids[-1]))
-        grids = grids[s:]
+        grids = occupancy_pyramid(take(self.lattice(), lo * k, size * k), self.levels)[s:]
         surface = np.zeros(tuple(size), bool)
         vertex = np.zeros(tuple(size) + (3,), np.float32)
         edge = np.zeros(tuple(size) + (3,), bool)

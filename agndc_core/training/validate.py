@@ -11,18 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from ..contour import dual_contour
-from ..grid import LATTICE_PAD
+from ..grid import lattice_to_world
 from ..labels import crossed_edges
 from ..mc import marching_cubes_lattice
 from ..metrics import evaluate, format_row
 from .data import load_sample, sample_mesh
 
 KEYS = ("cd", "f1", "nc", "ecd", "ef1")
-
-
-def _to_world(vertices: np.ndarray, affine: np.ndarray) -> np.ndarray:
-    points = np.asarray(vertices, dtype=np.float64) - LATTICE_PAD
-    return points @ affine[:3, :3].T + affine[:3, 3]
 
 
 def reconstruct_sample(model, sample: dict, mode: str = "band") -> tuple[np.ndarray, np.ndarray]:
@@ -32,7 +27,7 @@ def reconstruct_sample(model, sample: dict, mode: str = "band") -> tuple[np.ndar
     lattice = sample["lattice"]
     vertex, _ = predict_lattice(model, lattice, mode=mode)
     vertices, faces = dual_contour(vertex, crossed_edges(lattice), lattice)
-    return _to_world(vertices, sample["affine"]), faces
+    return lattice_to_world(vertices, sample["affine"]), faces
 
 
 def validate_model(model, folder, *, count: int = 8, n_samples: int = 20_000,
@@ -46,8 +41,8 @@ def validate_model(model, folder, *, count: int = 8, n_samples: int = 20_000,
         v, f = reconstruct_sample(model, sample, mode)
         rows["model"].append(format_row(evaluate(v, f, gt_v, gt_f, n_samples=n_samples)))
         mc_v, mc_f = marching_cubes_lattice(sample["lattice"])
-        rows["mc"].append(format_row(evaluate(_to_world(mc_v, sample["affine"]), mc_f, gt_v,
-                                              gt_f, n_samples=n_samples)))
+        mc_world = lattice_to_world(mc_v, sample["affine"])
+        rows["mc"].append(format_row(evaluate(mc_world, mc_f, gt_v, gt_f, n_samples=n_samples)))
     return {"val_samples": len(paths), "n_surface_samples": n_samples,
             **{name: {k: float(np.nanmean([r[k] for r in rs])) for k in KEYS}
                for name, rs in rows.items()}}

@@ -250,6 +250,24 @@ def test_import_grid(addon, tmp_path, kind):
     assert got_v[:, 0].min() > 99.0 and got_v[:, 2].max() < 20.0 + 2.5 * 40  # in millimetres
 
 
+def test_import_mirrored_nifti_faces_outward(addon, tmp_path):
+    """A NIfTI whose affine mirrors space (det < 0, common for scanner data) still gives an
+    outward-facing closed mesh in Blender: positive signed volume."""
+    import nibabel
+
+    occupancy = np.zeros((12, 10, 8), np.uint8)
+    occupancy[2:10, 2:8, 2:6] = 1
+    affine = np.diag([-1.5, 1.0, 2.0, 1.0])
+    path = tmp_path / "mirrored.nii.gz"
+    nibabel.save(nibabel.Nifti1Image(occupancy, affine), str(path))
+    assert bpy.ops.import_mesh.agndc_grid(filepath=str(path), method="mc") == {"FINISHED"}
+    vertices, faces = _mesh(bpy.data.objects["mirrored_MC"])
+    triangles = vertices[faces]
+    volume = np.einsum("ij,ij->i", triangles[:, 0],
+                       np.cross(triangles[:, 1], triangles[:, 2])).sum() / 6.0
+    assert volume > 0.9 * 8 * 6 * 4 * 1.5 * 2.0  # the block's volume in world units, outward
+
+
 @pytest.mark.parametrize("problem", ["empty", "unreadable", "missing", "not a grid"])
 def test_import_grid_errors_leave_scene_untouched(addon, tmp_path, problem):
     path = tmp_path / {"not a grid": "part.txt"}.get(problem, "part.npy")

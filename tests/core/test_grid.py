@@ -56,3 +56,25 @@ def test_numeric_binary_and_empty_grid():
 def test_singular_affine_refused():
     with pytest.raises(GridError, match="singular"):
         VoxelGrid(np.ones((2, 2, 2), bool), np.zeros((4, 4)))
+
+
+def test_lattice_to_world_is_index_to_world_after_the_pad():
+    from agndc_core.grid import LATTICE_PAD, VoxelGrid, lattice_to_world
+
+    affine = np.array([[0, -2.0, 0, 5], [0.5, 0, 0, -1], [0, 0, 3, 2], [0, 0, 0, 1]])
+    grid = VoxelGrid(np.ones((2, 3, 4), bool), affine)
+    points = np.random.default_rng(0).random((7, 3)) * 5
+    np.testing.assert_allclose(lattice_to_world(points + LATTICE_PAD, affine),
+                               grid.index_to_world(points))
+    # by hand: voxel (1, 2, 3) sits at affine @ (1, 2, 3, 1)
+    np.testing.assert_allclose(lattice_to_world([[2, 3, 4]], affine), [[1.0, -0.5, 11.0]])
+
+
+def test_occupancy_pyramid_ors_each_block():
+    from agndc_core.grid import occupancy_pyramid
+
+    lattice = np.zeros((8, 8, 4), bool)
+    lattice[5, 2, 3] = True
+    g = occupancy_pyramid(lattice, 2)
+    assert [x.shape for x in g] == [(8, 8, 4), (4, 4, 2), (2, 2, 1)]
+    assert g[1].sum() == 1 and g[1][2, 1, 1] and g[2].sum() == 1 and g[2][1, 0, 0]
