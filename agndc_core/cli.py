@@ -153,7 +153,8 @@ def _cmd_demo(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     vertices, faces = cad_part(args.seed)
     save_mesh(vertices, faces, out / "part.obj")
-    methods = ["mc", "oracle"] + [m for m in ("undc", "agndc") if _has_weights(m)]
+    methods = ["mc", "mc_taubin", "surfacenets", "oracle"] + [m for m in ("undc", "agndc")
+                                                           if _has_weights(m)]
     rows = []
     for method in methods:
         result = remesh_mesh(vertices, faces, resolution=args.res, method=method, source="part")
@@ -162,7 +163,7 @@ def _cmd_demo(args) -> int:
         rows.append({"method": method, **metrics, "seconds": result.seconds})
         if method == "mc":
             save_grid(result.grid, out / "part_grid.npz")
-    print(f"CAD part (seed {args.seed}) voxelised at {args.res}³, written to {out}/")
+    print(f"CAD part (shapes.cad_part({args.seed})) voxelised at {args.res}³, written to {out}/")
     print(markdown_table(summarize_rows(rows)))
     missing = [m for m in ("agndc", "undc") if m not in methods]
     if missing:
