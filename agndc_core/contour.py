@@ -29,9 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import AGNDCError
-
-#: For axis a, the two other axes in cyclic order: quads listed in this order face +a.
-OTHER_AXES = ((1, 2), (2, 0), (0, 1))
+from .grid import CELL_EDGES as EDGE_STARTS  # the one definition of a cell's 12 edges
+from .grid import OTHER_AXES
 
 
 class ContourError(AGNDCError, ValueError):
@@ -52,14 +51,10 @@ def _cell_edges() -> np.ndarray:
     """(12, 2) end corners of the cell edges; edge 4 a + 2 db + dc runs along axis a from the
     corner db e_b + dc e_c ((b, c) = OTHER_AXES[a])."""
     edges = []
-    for axis, (b, c) in enumerate(OTHER_AXES):
-        for db in (0, 1):
-            for dc in (0, 1):
-                start = np.zeros(3, dtype=np.int64)
-                start[b], start[c] = db, dc
-                end = start.copy()
-                end[axis] = 1
-                edges.append((_corner_index(start), _corner_index(end)))
+    for axis, start in EDGE_STARTS:
+        end = np.array(start)
+        end[axis] = 1
+        edges.append((_corner_index(start), _corner_index(end)))
     return np.array(edges, dtype=np.int64)
 
 

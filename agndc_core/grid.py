@@ -35,6 +35,18 @@ LATTICE_PAD = 1  # empty layers added on the low side before contouring
 #: so every method and the labels see the same lattice
 CASCADE_LEVELS = 2
 
+#: For axis a, the two other axes in cyclic order (a quad around an a-edge listed in this order
+#: faces +a).
+OTHER_AXES = ((1, 2), (2, 0), (0, 1))
+#: The 12 edges of a cell, written once: (axis, start), the edge leaving lattice point
+#: ``cell + start`` along +axis. Edge 4 a + 2 db + dc starts at db e_b + dc e_c with
+#: (b, c) = OTHER_AXES[a]. Labels, surface nets, the contour tables and the network's sparse
+#: up-sampling all read the cell's edges from here.
+CELL_EDGES = tuple(
+    (axis, tuple(int(x) for x in np.add(np.multiply(db, np.eye(3, dtype=int)[b]),
+                                        np.multiply(dc, np.eye(3, dtype=int)[c]))))
+    for axis, (b, c) in enumerate(OTHER_AXES) for db in (0, 1) for dc in (0, 1))
+
 #: Largest grid the remesher accepts, in voxels (512^3 plus room for non-cubic shapes).
 MAX_VOXELS = 600 * 600 * 600
 

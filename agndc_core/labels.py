@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grid import CASCADE_LEVELS, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
+from .grid import CELL_EDGES, CASCADE_LEVELS, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
 from .tolerances import tol
 from .voxelize import _choose_rule, check_mesh, inside_points
 
@@ -99,19 +99,12 @@ def surface_cells(edge: np.ndarray) -> np.ndarray:
     edge at point p marks the cells p, p - e_b, p - e_c, p - e_b - e_c for its two other axes.
     """
     cells = np.zeros(edge.shape[:3], dtype=bool)
-    for axis in range(3):
-        marked = edge[..., axis]
-        b, c = (axis + 1) % 3, (axis + 2) % 3
-        for shift_b in (0, 1):
-            for shift_c in (0, 1):
-                source = [slice(None)] * 3
-                target = [slice(None)] * 3
-                source[b] = slice(shift_b, None)
-                target[b] = slice(0, marked.shape[b] - shift_b)
-                source[c] = slice(shift_c, None)
-                target[c] = slice(0, marked.shape[c] - shift_c)
-                cells[tuple(target)] |= marked[tuple(source)]
-    cells[-1, :, :] = cells[:, -1, :] = cells[:, :, -1] = False  # cells need their far corner
+    inner = tuple(n - 1 for n in edge.shape[:3])  # cells need their far corner
+    for axis, start in CELL_EDGES:
+        # cell c has the edge leaving point c + start along axis
+        cells[:inner[0], :inner[1], :inner[2]] |= edge[
+            start[0]:start[0] + inner[0], start[1]:start[1] + inner[1],
+            start[2]:start[2] + inner[2], axis]
     return cells
 
 

@@ -18,6 +18,8 @@ import itertools
 import numpy as np
 import torch
 
+from .grid import CELL_EDGES
+
 #: offset of a cell without any crossed edge (its centre): such cells are never contoured, and
 #: the prior's *delta* (offset - centre) is zero there, which keeps band inference's far field
 #: untouched
@@ -41,18 +43,18 @@ def surface_nets_offsets(occupancy: torch.Tensor) -> torch.Tensor:
     lead = g.shape[:-3]
     total = g.new_zeros(*lead, *n_cells, 3)
     count = g.new_zeros(*lead, *n_cells)
-    for axis in range(3):
-        # (..., edges): 1 where the edge from p along +axis joins inside and outside
-        crossed = (g.narrow(axis - 3, 1, dims[axis] - 1) != g.narrow(axis - 3, 0, dims[axis] - 1))
-        crossed = crossed.to(torch.float32)
-        b, c = [a for a in range(3) if a != axis]
-        for db, dc in itertools.product((0, 1), repeat=2):
-            # the cell's edges along `axis` start at c + db e_b + dc e_c
-            part = crossed.narrow(b - 3, db, n_cells[b]).narrow(c - 3, dc, n_cells[c])
-            count += part
-            total[..., axis] += 0.5 * part
-            total[..., b] += db * part
-            total[..., c] += dc * part
+    # (..., X-1, Y, Z) etc.: 1 where the edge from p along +axis joins inside and outside
+    crossed = [(g.narrow(a - 3, 1, dims[a] - 1) != g.narrow(a - 3, 0, dims[a] - 1)).float()
+               for a in range(3)]
+    for axis, start in CELL_EDGES:
+        # cell c's edge leaving point c + start along axis, and its midpoint in the cell
+        part = crossed[axis]
+        for a in range(3):
+            if a != axis:
+                part = part.narrow(a - 3, start[a], n_cells[a])
+        count += part
+        for a in range(3):
+            total[..., a] += (0.5 if a == axis else start[a]) * part
     has = count > 0
     offsets = torch.where(has[..., None], total / count.clamp_min(1.0)[..., None],
                           torch.full_like(total, CENTRE))
