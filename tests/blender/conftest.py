@@ -13,7 +13,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 # Blender reads these once, on import: keep the user's own config, extensions and temp clean.
@@ -48,17 +47,14 @@ def built_zip(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def addon(built_zip):
-    """The installed and enabled extension: a namespace of its submodules, plus install time."""
-    start = time.perf_counter()
+    """The installed and enabled extension: a namespace of its submodules."""
     result = bpy.ops.extensions.package_install_files(
         filepath=str(built_zip), repo="user_default", enable_on_install=True)
-    seconds = time.perf_counter() - start
     assert result == {"FINISHED"}
     assert MODULE in bpy.context.preferences.addons.keys()
 
     class Addon:
         module = MODULE
-        install_seconds = seconds
         package = importlib.import_module(MODULE)
         remesh = importlib.import_module(f"{MODULE}.remesh")
         mesh_io = importlib.import_module(f"{MODULE}.mesh_io")
