@@ -43,8 +43,7 @@ OTHER_AXES = ((1, 2), (2, 0), (0, 1))
 #: (b, c) = OTHER_AXES[a]. Labels, surface nets, the contour tables and the network's sparse
 #: up-sampling all read the cell's edges from here.
 CELL_EDGES = tuple(
-    (axis, tuple(int(x) for x in np.add(np.multiply(db, np.eye(3, dtype=int)[b]),
-                                        np.multiply(dc, np.eye(3, dtype=int)[c]))))
+    (axis, tuple(db if i == b else dc if i == c else 0 for i in range(3)))
     for axis, (b, c) in enumerate(OTHER_AXES) for db in (0, 1) for dc in (0, 1))
 
 #: Largest grid the remesher accepts, in voxels (512^3 plus room for non-cubic shapes).
@@ -101,8 +100,7 @@ class VoxelGrid:
 
     def index_to_world(self, points_nx3: np.ndarray) -> np.ndarray:
         """Map (N, 3) index coordinates (voxel centres at integers) to (N, 3) world coordinates."""
-        return lattice_to_world(np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3)
-                                + LATTICE_PAD, self.affine)
+        return _apply_affine(points_nx3, self.affine)
 
     def world_to_index(self, points_nx3: np.ndarray) -> np.ndarray:
         """Inverse of ``index_to_world``."""
@@ -185,8 +183,14 @@ def occupancy_pyramid(lattice: np.ndarray, levels: int) -> list[np.ndarray]:
 
 def lattice_to_world(points_nx3: np.ndarray, affine: np.ndarray) -> np.ndarray:
     """(N, 3) padded-lattice coordinates -> (N, 3) world coordinates (point p = voxel p - pad)."""
-    points = np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3) - LATTICE_PAD
-    return points @ np.asarray(affine)[:3, :3].T + np.asarray(affine)[:3, 3]
+    return _apply_affine(np.asarray(points_nx3, dtype=np.float64) - LATTICE_PAD, affine)
+
+
+def _apply_affine(points_nx3, affine) -> np.ndarray:
+    """(N, 3) index coordinates -> (N, 3) world coordinates under a (4, 4) affine."""
+    points = np.asarray(points_nx3, dtype=np.float64).reshape(-1, 3)
+    affine = np.asarray(affine, dtype=np.float64)
+    return points @ affine[:3, :3].T + affine[:3, 3]
 
 
 def pool_occupancy(lattice: np.ndarray) -> np.ndarray:

@@ -23,8 +23,9 @@ from ..grid import CELL_EDGES
 CELL_CORNERS = torch.tensor(list(itertools.product((0, 1), repeat=3)), dtype=torch.int64)
 #: for each edge axis, the 4 corners (indices into CELL_CORNERS) its cell edges leave from:
 #: x-edges leave from (0, dy, dz), y-edges from (dx, 0, dz), z-edges from (dx, dy, 0)
-CELL_EDGE_CORNERS = tuple(tuple(sorted(4 * s[0] + 2 * s[1] + s[2] for a, s in CELL_EDGES if a == axis))
-                          for axis in range(3))
+CELL_EDGE_CORNERS = tuple(
+    tuple(sorted(4 * start[0] + 2 * start[1] + start[2] for a, start in CELL_EDGES if a == axis))
+    for axis in range(3))
 
 
 def cube_offsets(k: int) -> torch.Tensor:

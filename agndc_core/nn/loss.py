@@ -102,10 +102,9 @@ class AGNDCLoss(nn.Module):
                 ) -> tuple[torch.Tensor, dict]:
         """Total loss and its parts ({"vertex", "edge", "lambda"}, detached floats)."""
         loss_v, loss_e = vertex_edge_losses(pred, vertex, edge, surface, valid, quadric)
-        if not self.train_edges:
-            return loss_v, {"vertex": float(loss_v.detach()), "edge": float(loss_e.detach()),
-                            "lambda": 0.0}
-        total = loss_v + self.weight * loss_e + self.t
         parts = {"vertex": float(loss_v.detach()), "edge": float(loss_e.detach()),
-                 "lambda": float(self.weight.detach())}
+                 "lambda": float(self.weight.detach()) if self.train_edges else 0.0}
+        if not self.train_edges:
+            return loss_v, parts
+        total = loss_v + self.weight * loss_e + self.t
         return total, parts

@@ -231,3 +231,40 @@ def test_quadric_transform_keeps_the_error_measure(seed):
         new[:, r, c] = new[:, c, r] = q_new[:, k]
     np.testing.assert_allclose(np.einsum("ni,nij,nj->n", moved, new, moved),
                                np.einsum("ni,nij,nj->n", d, full, d), rtol=1e-5)
+
+
+def test_worker_processes_build_the_same_batches(data_dir, tmp_path):
+    """--workers only moves crop building into other processes: step k's batch is the same."""
+    trainer = Trainer(_config(data_dir, tmp_path / "run"))
+    trainer.cfg.workers = 2
+    parallel = list(trainer._batches(0, 2, 5))
+    trainer.cfg.workers = 0
+    serial = list(trainer._batches(0, 2, 5))
+    for a, b in zip(parallel, serial):
+        assert a.keys() == b.keys()
+        for key in a:
+            pairs = zip(a[key], b[key]) if key == "g" else [(a[key], b[key])]
+            assert all(torch.equal(x, y) for x, y in pairs), key
+
+
+def test_time_budget_stops_cleanly_and_resume_finishes(data_dir, tmp_path):
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.max_seconds = 1e-9  # out of time after the first step
+    first = Trainer(cfg)
+    assert first.run(progress=False) is None
+    info = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert (info["scale"], info["step"], info["done"]) == (2, 1, False)
+    cfg = _config(data_dir, tmp_path / "run")
+    second = Trainer(cfg)
+    assert second.resume() and second.run(progress=False).exists()
+
+
+def test_a_cuda_device_without_cuda_is_a_clear_error(data_dir, tmp_path):
+    from agndc_core.errors import AGNDCError
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.device = "cuda"
+    with pytest.raises(AGNDCError, match="CUDA"):
+        Trainer(cfg)
