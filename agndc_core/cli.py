@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from .errors import AGNDCError
-from .pipeline import METHODS
+from .pipeline import MESH_ONLY_METHODS, METHODS
 
 
 def main(argv=None) -> int:
@@ -39,7 +39,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="output .obj/.ply/.stl/.glb")
     p.add_argument("--method", choices=METHODS, default="agndc",
                    help="agndc, undc (networks), surfacenets, mc, mc_taubin (no weights), "
-                   "oracle (mesh input only)")
+                   "sharp (exact dual contouring of the mesh's own surface; mesh input only), "
+                   "oracle (the same, named for evaluation)")
     p.add_argument("--res", type=int, default=64, help="voxels on the longest side (mesh input)")
     p.add_argument("--checkpoint", type=Path, help="weights (.safetensors); default: shipped")
     p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
@@ -102,8 +103,9 @@ def _cmd_remesh(args) -> int:
                    min_component_faces=args.min_component_faces)
     try:
         if is_grid_path(args.input):
-            if args.method == "oracle":
-                raise AGNDCError("the oracle needs a mesh as input, not a grid")
+            if args.method in MESH_ONLY_METHODS:
+                raise AGNDCError(f"--method {args.method} needs a mesh as input (it contours "
+                                 "the mesh's own surface), not a voxel grid")
             result = remesh(load_grid(args.input, model_index=args.model_index), **options)
         else:
             vertices, faces = load_mesh(args.input)

@@ -12,6 +12,9 @@ Methods:
              steps, default lambda/nu), smoothed in lattice coordinates;
     "oracle" dual contouring of ground-truth labels: needs the source mesh (``remesh_mesh``);
              the ceiling any network can reach with this contouring.
+    "sharp"  the same computation offered to users as a remesher for mesh input ("exact dual
+             contouring"): each dual vertex is the centroid of the source mesh's own surface
+             inside its cell, so flat faces stay flat and creases stay where the source has them.
 
 Topology: with binary input the crossed edges of the finest lattice are exactly the edges whose
 end points differ, so the networks supply the vertex positions and the input supplies the edges
@@ -39,7 +42,9 @@ from .errors import AGNDCError, CancelledError, MeshError
 from .grid import VoxelGrid, lattice_to_world, pad_to_lattice
 from .labels import crossed_edges
 
-METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle")
+METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "sharp")
+#: methods that contour the source mesh's own intersections: mesh input only
+MESH_ONLY_METHODS = ("oracle", "sharp")
 #: default checkpoint name per learned method (agndc_core/weights/<name>.safetensors)
 CHECKPOINT_NAMES = {"agndc": "agndc", "undc": "undc"}
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
@@ -94,13 +99,13 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
 
     Args:
         grid: the input; a plain (X, Y, Z) array is accepted and placed at unit voxel size.
-        method: one of METHODS. "oracle" needs ``labels`` (use ``remesh_mesh``).
+        method: one of METHODS. "oracle"/"sharp" need ``labels`` (use ``remesh_mesh``).
         checkpoint: path of a .safetensors checkpoint (learned methods); default: shipped weights.
         threads: torch CPU threads (default: torch's choice).
         min_component_faces: drop connected components smaller than this.
         tile: lattice tile size for large grids (learned methods); None = automatic.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
-        labels: ground-truth ``ScaleLabels`` list, for "oracle".
+        labels: ground-truth ``ScaleLabels`` list, for "oracle"/"sharp".
     """
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
@@ -170,15 +175,16 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
                 source: str = "mesh", **options) -> RemeshResult:
     """Voxelise a mesh (in its own coordinates) at ``resolution`` and ``remesh`` the grid.
 
-    For ``method="oracle"`` the ground-truth labels of the mesh are contoured instead of a
-    network's predictions. Other keyword options are passed to ``remesh``.
+    For ``method="oracle"`` or ``"sharp"`` the ground-truth labels of the mesh (its exact
+    intersections and normals) are contoured instead of a network's predictions. Other keyword
+    options are passed to ``remesh``.
     """
     from .voxelize import voxelize
 
     start = time.perf_counter()
     grid = voxelize(vertices, faces, resolution, source=source)
     voxel_seconds = time.perf_counter() - start
-    if method == "oracle":
+    if method in MESH_ONLY_METHODS:
         from .labels import make_labels
 
         options["labels"] = make_labels(vertices, faces, grid, levels=0)
@@ -188,12 +194,55 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
     return result
 
 
+def remesh_file(path, *, method: str = "agndc", resolution: int = 64,
+                voxel_size: float | None = None, model_index: int = 0,
+                **options) -> RemeshResult:
+    """Read a grid or mesh file and remesh it: the one file path behind ``agndc remesh`` and
+    ``agndc batch`` (``batch.remesh_many``).
+
+    A grid file (``gridio.GRID_EXTENSIONS``) is used as it is, in its own world units
+    (``resolution`` and ``voxel_size`` do not apply). A mesh is voxelised with ``resolution``
+    voxels along its longest side, or, when ``voxel_size`` is given, with voxels of at most that
+    many world units (``resolution_for_voxel_size``). Other keyword options go to ``remesh``.
+    """
+    from .gridio import is_grid_path, load_grid, load_mesh
+
+    path = Path(path)
+    if is_grid_path(path):
+        if method in MESH_ONLY_METHODS:
+            raise AGNDCError(f"{path.name}: --method {method} needs a mesh as input (it contours "
+                             "the mesh's own surface), not a voxel grid")
+        return remesh(load_grid(path, model_index=model_index), method=method, **options)
+    vertices, faces = load_mesh(path)
+    if voxel_size is not None:
+        resolution = resolution_for_voxel_size(vertices, voxel_size, source=path.name)
+    return remesh_mesh(vertices, faces, resolution=resolution, method=method, source=path.name,
+                       **options)
+
+
+def resolution_for_voxel_size(vertices_vx3: np.ndarray, voxel_size: float, *,
+                              source: str = "mesh", margin: int = 1) -> int:
+    """The ``voxelize`` resolution whose voxels are at most ``voxel_size`` world units.
+
+    ``voxelize`` spreads the longest bounding-box side over ``resolution - 2 * margin`` voxels,
+    so this is ``ceil(longest side / voxel_size) + 2 * margin`` (the voxels come out exactly
+    ``voxel_size`` when the side is a multiple of it, a little smaller otherwise). Out-of-range
+    results are left to ``voxelize``, which names the mesh and the limit.
+    """
+    if not (np.isfinite(voxel_size) and voxel_size > 0):
+        raise AGNDCError(f"{source}: voxel size must be a positive number, got {voxel_size}")
+    vertices = np.asarray(vertices_vx3, dtype=np.float64).reshape(-1, 3)
+    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
+    # a small relative slack so that a side of exactly k voxels is not rounded up to k + 1
+    return int(np.ceil(extent / voxel_size * (1 - 1e-9))) + 2 * margin
+
+
 def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel):
-    """(D, 3) vertex offsets of a learned method or the oracle (labels' vertices)."""
-    if method == "oracle":
+    """(D, 3) vertex offsets of a learned method or the oracle/sharp (labels' vertices)."""
+    if method in MESH_ONLY_METHODS:
         if labels is None:
-            raise AGNDCError("the oracle contours ground-truth labels: call remesh_mesh with the "
-                             "source mesh, not remesh with a grid alone")
+            raise AGNDCError(f"method {method!r} contours the source mesh's own surface: it "
+                             "needs a mesh as input (remesh_mesh), not a voxel grid alone")
         if labels[0].inside.shape != lattice.shape:
             raise MeshError("oracle labels do not match the grid's lattice")
         return labels[0].vertex

@@ -80,11 +80,10 @@ class Trainer:
         if self.device.type == "cuda" and not torch.cuda.is_available():
             raise AGNDCError(f"--device {cfg.device}: this torch build sees no CUDA device")
         self.model = AGNDCCascade(self.model_config).to(self.device)
-        # the finest scale's edges are the input's crossing parity when the vertex prior (and
-        # input topology) is used: no edge loss there, its gradient would train a dead head
+        # the finest scale's edges are the input's crossing parity (inference always contours
+        # the input's topology): no edge loss there, its gradient would train a dead head
         self.losses = torch.nn.ModuleList([
-            AGNDCLoss(train_edges=not (s == 0 and self.model_config.surface_nets_prior))
-            for s in range(levels + 1)]).to(self.device)
+            AGNDCLoss(train_edges=s != 0) for s in range(levels + 1)]).to(self.device)
         if cfg.init:
             self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels)

@@ -119,3 +119,18 @@ def test_quadrics_are_the_normals_of_the_surface_in_each_cell():
     # a flat cell's only direction is one of the box's face normals
     top = np.linalg.eigh(full[flat])[1][:, :, 2]
     assert np.all(np.abs(top @ normals.T).max(1) > 0.999)
+
+
+def test_sharp_mode_is_the_oracle_for_users():
+    """"sharp" (the users' name) contours the same labels as "oracle"; a grid alone is refused."""
+    from agndc_core.errors import AGNDCError
+    from agndc_core.pipeline import remesh
+
+    mesh = SHAPES["rotated_cube"]()
+    sharp = remesh_mesh(mesh.vertices, mesh.faces, resolution=RES, method="sharp")
+    oracle = remesh_mesh(mesh.vertices, mesh.faces, resolution=RES, method="oracle")
+    np.testing.assert_array_equal(sharp.faces, oracle.faces)
+    np.testing.assert_allclose(sharp.vertices, oracle.vertices)
+    assert sharp.method == "sharp"
+    with pytest.raises(AGNDCError, match="needs a mesh"):
+        remesh(sharp.grid, method="sharp")
