@@ -63,6 +63,34 @@ def _bilinear(field, pos, lateral):
     return total
 
 
+def test_dense_snake_matches_the_definition_with_replicated_borders():
+    """DenseOps.snake (grid_sample) against the tap sum written from the definition; the
+    offsets reach past the lattice, where the border point is replicated."""
+    from agndc_core.nn.dense_ops import DenseOps
+
+    rng = np.random.default_rng(2)
+    shape, k, b = (6, 5, 7), 5, 2
+    y = rng.normal(size=(1, *shape, k * b))
+    offsets = rng.uniform(-3.0, 3.0, size=(1, *shape, 2, k))
+    ops = DenseOps(shape)
+    for axis in range(3):
+        got = ops.snake(torch.tensor(y, dtype=torch.float32),
+                        torch.tensor(offsets, dtype=torch.float32), axis).numpy()
+        lateral = [a for a in range(3) if a != axis]
+        for point in itertools.product(*map(range, shape)):
+            want = np.zeros(b)
+            for t in range(k):
+                pos = np.array(point, dtype=float)
+                pos[axis] += t - k // 2
+                pos[lateral] += offsets[(0, *point, slice(None), t)]
+                pos = np.clip(pos, 0, np.array(shape) - 1)  # replicate border
+                for c in range(b):
+                    # one replicated layer so a weight-0 corner past the border can be read
+                    field = np.pad(y[0, ..., t * b + c], 1, mode="edge")
+                    want[c] += _bilinear(field, pos + 1, lateral)
+            np.testing.assert_allclose(got[(0, *point)], want, rtol=1e-4, atol=1e-4)
+
+
 def test_cell_surface_reads_the_cells_twelve_edges():
     """A cell is a surface cell if one of its 12 edges (grid.py convention: x-edges leave
     corners (0, dy, dz), ...) is likely crossed; probabilities elsewhere do not count."""
