@@ -1,19 +1,35 @@
 #!/usr/bin/env python3
 """Build the installable AGNDC Remesher extension zip(s) for Blender 4.2+.
 
-    python build_addon.py                          # all platforms, torch + deps as bundled wheels
+    python build_addon.py                          # all platforms, Python 3.11 and 3.13 wheels
     python build_addon.py --platform linux-x64     # one platform (repeatable)
+    python build_addon.py --python 3.11            # Blender 4.2-5.0 only (3.13: Blender 5.1+)
+    python build_addon.py --find-links /opt/wheels # offline torch: a folder with the +cpu wheel
     python build_addon.py --no-wheels              # developer build: code + weights only
     python build_addon.py --no-wheels --legacy     # + a legacy add-on zip (folder inside)
 
 Steps: (1) stage ``build/agndc_remesher/``: ``agndc_blender/*`` at the root, ``agndc_core/``
 vendored beside it (without ``training/``; shipped weights included), and a copy of
 ``blender_manifest.toml`` whose ``platforms``/``wheels`` are filled in (the source manifest is
-never rewritten); (2) ``pip download`` the runtime wheels per platform tag into
-``build/wheels/<platform>/`` (cached; numpy is left out because Blender ships it);
-(3) validate and build with Blender's own ``blender_ext.py`` (stdlib-only, shipped inside the
-``bpy`` wheel, or ``--blender`` to use ``blender --command extension``) with
+never rewritten); (2) ``pip download`` the runtime wheels per platform and Python into
+``build/wheels/<platform>/<cpXY>/`` (numpy is left out because Blender ships it) and refuse any
+CUDA build of torch; (3) validate and build with Blender's own ``blender_ext.py`` (stdlib-only,
+shipped inside the ``bpy`` wheel, or ``--blender`` to use ``blender --command extension``) with
 ``--split-platforms``; (4) validate every zip.
+
+Wheel sources. PyPI's Linux x86-64 torch is the CUDA build (``2.13.0+cu130`` inside, 527 MB,
+plus ``cuda-toolkit``, ``nvidia-*`` and ``triton`` wheels of several GB), so on linux-x64 torch
+comes from PyTorch's CPU index (``--torch-index``, default ``TORCH_CPU_INDEX``) or, offline,
+from ``--find-links`` folders only. PyPI's Windows and macOS torch wheels are CPU builds
+(checked in their metadata: ``torch/version.py`` says ``cuda = None``, no CUDA libraries, and
+every CUDA requirement is marked ``platform_system == "Linux"``), so they come from PyPI.
+
+Two Pythons. Blender 4.2-5.0 embed CPython 3.11, Blender 5.1+ CPython 3.13. One zip carries
+both wheel sets: at install Blender keeps only the wheels whose platform and Python tags match
+it (``bl_pkg/bl_extension_ops.py::_extensions_wheel_filter_for_this_system``), then, per
+project, the highest version (``_bpy_internal/extensions/wheel_manager.py::
+wheel_list_deduplicate_as_skip_set``); ``python_compatible`` mirrors the filter and
+``merge_wheel_sets`` the deduplication.
 """
 
 from __future__ import annotations
@@ -28,11 +44,18 @@ import sys
 import tempfile
 import time
 import zipfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent
 EXTENSION_ID = "agndc_remesher"
-PYTHON_VERSION = "3.11"  # Blender 4.2-5.0 embed CPython 3.11
+
+#: target Python -> the Blender releases that embed it
+PYTHONS = {"3.11": "Blender 4.2-5.0", "3.13": "Blender 5.1+"}
+#: PyTorch's CPU-only wheel index (torch 2.13.0+cpu for every Python and platform it builds)
+TORCH_CPU_INDEX = "https://download.pytorch.org/whl/cpu"
+#: platforms whose PyPI torch is a CUDA build: torch comes from the CPU index (or --find-links)
+CPU_INDEX_PLATFORMS = ("linux-x64",)
 
 #: manifest platform -> the pip platform tags it accepts. pip does not widen an explicit
 #: --platform to older manylinux/macOS versions by itself, so list them.
@@ -45,8 +68,6 @@ PLATFORM_TAGS = {
                     *[f"macosx_{major}_0_universal2" for major in range(14, 10, -1)],
                     *[f"macosx_10_{minor}_universal2" for minor in range(15, 8, -1)]],
 }
-#: Python ABIs the wheels may target (CPython 3.11 extension modules, stable ABI, pure)
-ABIS = ["cp311", "abi3", "none"]
 
 #: what agndc_core imports at run time in Blender (torch and the libraries imported by the
 #: remesh, grid-IO and metrics paths); numpy is Blender's own. manifold3d (training shapes only),
@@ -59,12 +80,48 @@ RUNTIME_REQUIREMENTS = [
     "nibabel>=5.0",
     "safetensors>=0.4",
 ]
-#: resolution constraints: Blender 4.2-5.0 ship numpy 1.x, so pick wheels that support it
-CONSTRAINTS = ["numpy>=1.24,<2"]
+#: resolution constraints per Python: pick wheels that work with the numpy Blender ships
+#: (Blender 4.2-5.0: numpy 1.x, bpy 4.5/5.0 pin numpy>=1.26,<2; bpy 5.2.3 (cp313) pins
+#: numpy>=2.2,<3)
+CONSTRAINTS = {"3.11": ["numpy>=1.24,<2"], "3.13": ["numpy>=2.2,<3"]}
 #: wheels dropped after download (Blender provides them)
 PROVIDED_BY_BLENDER = ("numpy",)
+#: projects that exist only for GPU (CUDA) builds of torch: never bundled
+CUDA_PROJECTS = re.compile(r"^(nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
 
 EXCLUDE_PATTERNS = shutil.ignore_patterns("__pycache__", "*.pyc", ".*")
+
+
+class BuildError(SystemExit):
+    """A build that cannot go on; the message says why and what to do (exit status 1)."""
+
+    def __init__(self, message: str):
+        super().__init__(f"build_addon.py: error: {message}")
+
+
+class UnresolvedError(BuildError):
+    """pip found no wheel set for one platform and Python (``requirements``: what it was asked)."""
+
+    def __init__(self, message: str, requirements=()):
+        super().__init__(message)
+        self.requirements = list(requirements)
+
+
+@dataclass
+class WheelSources:
+    """Where wheels come from: pip's configured indexes, plus local folders and, for the
+    platforms in CPU_INDEX_PLATFORMS, a CPU-only torch index (None: --find-links only)."""
+
+    torch_index: str | None = TORCH_CPU_INDEX
+    find_links: list[Path] = field(default_factory=list)
+
+    def pip_args(self, platform: str, project: str) -> list[str]:
+        links = [arg for d in self.find_links for arg in ("--find-links", str(d))]
+        if project != "torch" or platform not in CPU_INDEX_PLATFORMS:
+            return links
+        if self.torch_index is None:  # offline: never fall back to PyPI's CUDA torch
+            return ["--no-index", *links]
+        return ["--index-url", self.torch_index, *links]
 
 
 def main(argv=None) -> int:
@@ -74,8 +131,13 @@ def main(argv=None) -> int:
     stage = stage_sources(args.build_dir / EXTENSION_ID)
     wheels: list[Path] = []
     if not args.no_wheels:
+        sources = WheelSources(torch_index=args.torch_index, find_links=args.find_links)
         for platform in platforms:
-            wheels += download_wheels(platform, args.build_dir / "wheels" / platform)
+            per_python: dict[str, list[Path]] = {}
+            for python in args.python:
+                per_python[python] = download_consistent(
+                    platform, python, sources, args.build_dir / "wheels" / platform, per_python)
+            wheels += merge_wheel_sets(per_python, platform)
         copy_wheels(wheels, stage / "wheels")
     names = sorted({wheel.name for wheel in wheels})  # pure wheels appear once per platform
     write_manifest(stage / "blender_manifest.toml", platforms, [f"./wheels/{n}" for n in names])
@@ -88,7 +150,7 @@ def main(argv=None) -> int:
     cli.run(*build_args, *([] if args.no_wheels else ["--split-platforms"]))
     zips = sorted(args.out.glob(f"{EXTENSION_ID}-*.zip"))
     if not zips:
-        raise SystemExit("build produced no zip")
+        raise BuildError("the build produced no zip")
     for path in zips:
         cli.run("validate", str(path))
         print(f"{path}  {path.stat().st_size / 1e6:.1f} MB")
@@ -104,6 +166,15 @@ def parse_args(argv):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--platform", action="append", choices=sorted(PLATFORM_TAGS),
                         help="build for this platform only (repeatable; default: all)")
+    parser.add_argument("--python", type=parse_pythons, default=list(PYTHONS),
+                        help="comma-separated target Pythons (default: 3.11,3.13; 3.11 = "
+                             "Blender 4.2-5.0, 3.13 = Blender 5.1+)")
+    parser.add_argument("--torch-index", default=None, metavar="URL",
+                        help=f"CPU-only torch index for {', '.join(CPU_INDEX_PLATFORMS)} "
+                             f"(default: {TORCH_CPU_INDEX}, or none with --find-links)")
+    parser.add_argument("--find-links", action="append", type=Path, default=[], metavar="DIR",
+                        help="also take wheels from this folder (repeatable); without "
+                             "--torch-index, the CPU torch wheel must be in one (offline build)")
     parser.add_argument("--no-wheels", action="store_true",
                         help="developer build without bundled wheels (torch etc. must already "
                              "be importable in Blender); one zip for all platforms")
@@ -113,10 +184,27 @@ def parse_args(argv):
                              "the core's dependencies must come from Blender's Python)")
     parser.add_argument("--out", type=Path, default=ROOT / "dist", help="output folder")
     parser.add_argument("--build-dir", type=Path, default=ROOT / "build",
-                        help="staging folder and wheel cache")
+                        help="staging folder and wheel folders")
     parser.add_argument("--blender", help="a Blender 4.2+ executable to build and validate "
                                           "with (default: blender_ext.py from the bpy module)")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    missing = [str(d) for d in args.find_links if not d.is_dir()]
+    if missing:
+        parser.error(f"--find-links: not a folder: {', '.join(missing)}")
+    if args.torch_index is None and not args.find_links:
+        args.torch_index = TORCH_CPU_INDEX
+    return args
+
+
+def parse_pythons(text: str) -> list[str]:
+    """``"3.11,3.13"`` -> ["3.11", "3.13"]; only Pythons that some Blender embeds."""
+    pythons = [p.strip() for p in text.split(",") if p.strip()]
+    unknown = [p for p in pythons if p not in PYTHONS]
+    if not pythons or unknown:
+        raise argparse.ArgumentTypeError(
+            f"unsupported Python {', '.join(unknown) or text!r}; choose from "
+            + ", ".join(f"{p} ({b})" for p, b in PYTHONS.items()))
+    return list(dict.fromkeys(pythons))
 
 
 def _manifest_version() -> str:
@@ -143,7 +231,7 @@ def write_manifest(path: Path, platforms: list[str], wheels: list[str]) -> None:
     listed = ", ".join(f'"{p}"' for p in platforms)
     text, count = re.subn(r"(?m)^platforms\s*=.*$", f"platforms = [{listed}]", text)
     if count != 1:
-        raise SystemExit("blender_manifest.toml: expected exactly one 'platforms = [...]' line")
+        raise BuildError("blender_manifest.toml: expected exactly one 'platforms = [...]' line")
     if wheels:
         lines = ",\n".join(f'  "{w}"' for w in wheels)
         block = f"wheels = [\n{lines},\n]\n\n"
@@ -153,43 +241,225 @@ def write_manifest(path: Path, platforms: list[str], wheels: list[str]) -> None:
     path.write_text(text, encoding="utf-8")
 
 
-def download_wheels(platform: str, dest: Path) -> list[Path]:
-    """Runtime wheels (with dependencies, minus Blender's own) for one platform, cached in dest.
+# -- downloading ------------------------------------------------------------------------------
+
+def download_consistent(platform: str, python: str, sources: WheelSources, cache: Path,
+                        earlier: dict[str, list[Path]]) -> list[Path]:
+    """``download_wheels`` with the wheels that the earlier Pythons' sets share with this one
+    (pure and stable-ABI wheels) pinned to the same versions, so one copy serves every Blender
+    (Blender would install only the highest version of each anyway). Falls back to an unpinned
+    resolution when the pins cannot be met; ``merge_wheel_sets`` then checks the outcome."""
+    pins = sorted({f"{_project(w)}=={_version(w)}" for wheels in earlier.values()
+                   for w in wheels if python_compatible(w.name, python)})
+    if not pins:
+        return download_wheels(platform, python, sources, cache)
+    try:
+        return download_wheels(platform, python, sources, cache, pins=pins)
+    except UnresolvedError as error:
+        if error.requirements == RUNTIME_REQUIREMENTS[:1]:
+            raise  # torch itself is missing: the pins do not matter
+        print(f"[{platform} {python}] the versions shared with Python "
+              f"{', '.join(earlier)} do not resolve; resolving again without them", flush=True)
+        return download_wheels(platform, python, sources, cache)
+
+
+def download_wheels(platform: str, python: str, sources: WheelSources, cache: Path, *,
+                    pins=()) -> list[Path]:
+    """Runtime wheels (with dependencies, minus Blender's own) for one platform and Python.
 
     pip evaluates environment markers for the machine it runs on, not for ``--platform``, so on
     Linux it would ask for torch's CUDA wheels even for Windows. torch is therefore fetched
-    without dependencies, and its ``Requires-Dist`` is evaluated for the target platform here.
+    without dependencies, checked to be a CPU build, and its ``Requires-Dist`` is evaluated for
+    the target platform and Python here. The folder is emptied first, so only this run's
+    resolution is bundled (pip's own cache keeps repeated builds from downloading again).
+    ``pins`` are extra constraints (``project==version``).
     """
-    dest.mkdir(parents=True, exist_ok=True)
+    dest = cache / f"cp{python.replace('.', '')}"
+    if dest.exists():
+        shutil.rmtree(dest)
+    dest.mkdir(parents=True)
     torch_req, others = RUNTIME_REQUIREMENTS[0], RUNTIME_REQUIREMENTS[1:]
-    print(f"[{platform}] pip download {' '.join(RUNTIME_REQUIREMENTS)}", flush=True)
-    _pip_download(platform, dest, [torch_req], deps=False)
-    (torch_wheel,) = [w for w in dest.glob("torch-*.whl")
-                      if _version(w).split("+")[0] == torch_req.split("==")[1]]
-    _pip_download(platform, dest, others + _requirements_for(torch_wheel, platform), deps=True)
-    wheels = [w for w in sorted(dest.glob("*.whl"))
-              if _project(w) not in PROVIDED_BY_BLENDER and _fits(w, platform)]
-    print(f"[{platform}] {len(wheels)} wheels, "
+    print(f"[{platform} {python}] pip download {' '.join(RUNTIME_REQUIREMENTS)}", flush=True)
+    constraints = [*CONSTRAINTS[python], *pins]
+    _pip_download(platform, python, dest, [torch_req], sources.pip_args(platform, "torch"),
+                  constraints, deps=False)
+    (torch_wheel,) = dest.glob("torch-*.whl")
+    torch_deps = _requirements_for(torch_wheel, platform, python)
+    check_cpu_only([torch_wheel], platform, python, requirements=torch_deps)
+    _pip_download(platform, python, dest, others + torch_deps,
+                  sources.pip_args(platform, "deps"), constraints, deps=True)
+    wheels = [w for w in sorted(dest.glob("*.whl")) if _project(w) not in PROVIDED_BY_BLENDER]
+    check_cpu_only(wheels, platform, python)
+    misfits = [w.name for w in wheels if not fits(w.name, platform, python)]
+    if misfits:
+        raise BuildError(f"{platform}, Python {python}: pip returned wheels Blender would not "
+                         f"install there: {', '.join(misfits)}")
+    print(f"[{platform} {python}] {len(wheels)} wheels, "
           f"{sum(w.stat().st_size for w in wheels) / 1e6:.1f} MB", flush=True)
     return wheels
 
 
-def _pip_download(platform: str, dest: Path, requirements: list[str], deps: bool) -> None:
-    with tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False) as handle:
-        handle.write("\n".join(CONSTRAINTS) + "\n")
-        constraints = handle.name
+def pip_download_command(platform: str, python: str, dest: Path, requirements: list[str],
+                         source_args: list[str], *, deps: bool, constraints: Path) -> list[str]:
+    """The ``pip download`` command line for one platform and target Python."""
     command = [sys.executable, "-m", "pip", "download", "--disable-pip-version-check",
-               "--only-binary=:all:", "--python-version", PYTHON_VERSION,
-               "--implementation", "cp", "--dest", str(dest), "-c", constraints]
+               "--only-binary=:all:", "--python-version", python, "--implementation", "cp",
+               "--dest", str(dest), "-c", str(constraints), *source_args]
     command += [] if deps else ["--no-deps"]
     for tag in PLATFORM_TAGS[platform]:
         command += ["--platform", tag]
-    for abi in ABIS:
+    for abi in abis(python):
         command += ["--abi", abi]
-    try:
-        subprocess.run(command + requirements, check=True)
-    finally:
-        Path(constraints).unlink()
+    return command + requirements
+
+
+def abis(python: str) -> list[str]:
+    """ABI tags a CPython ``python`` accepts: its own extension ABI, the stable ABI, pure."""
+    return [f"cp{python.replace('.', '')}", "abi3", "none"]
+
+
+def _pip_download(platform: str, python: str, dest: Path, requirements: list[str],
+                  source_args: list[str], constraint_lines: list[str], *, deps: bool) -> None:
+    with tempfile.TemporaryDirectory() as folder:
+        constraints = Path(folder) / "constraints.txt"
+        constraints.write_text("\n".join(constraint_lines) + "\n")
+        command = pip_download_command(platform, python, dest, requirements, source_args,
+                                       deps=deps, constraints=constraints)
+        result = subprocess.run(command, stderr=subprocess.PIPE, text=True)
+    sys.stderr.write(result.stderr)
+    if result.returncode != 0:
+        raise UnresolvedError(unresolved_message(platform, python, requirements, result.stderr),
+                              requirements)
+
+
+def unresolved_message(platform: str, python: str, requirements: list[str], stderr: str) -> str:
+    """Why a wheel set could not be resolved, and the two ways out."""
+    reason = [line for line in stderr.splitlines() if line.startswith("ERROR")][:2]
+    torch_hint = ""
+    if platform in CPU_INDEX_PLATFORMS and any(r.startswith("torch") for r in requirements):
+        torch_hint = (f" (torch for {platform} comes only from --torch-index or --find-links "
+                      "folders: it needs the +cpu wheel for this Python)")
+    return (f"cannot resolve the wheels for {platform}, Python {python} ({PYTHONS[python]}): "
+            f"{' '.join(requirements)}{torch_hint}. pip: {' / '.join(reason) or 'see above'}. "
+            f"Build without that Python (e.g. --python 3.11) or pass a folder that holds the "
+            f"missing wheels with --find-links DIR.")
+
+
+# -- checks ------------------------------------------------------------------------------------
+
+def check_cpu_only(wheels, platform: str, python: str, requirements=()) -> None:
+    """Refuse a CUDA build of torch: a ``+cu…``/``+rocm…`` local version, a torch whose
+    ``torch/version.py`` names a CUDA version, or any CUDA-only project (``nvidia-*``,
+    ``cuda-*``, ``triton``) among the wheels or torch's requirements for the target.
+
+    Args:
+        wheels: wheel paths (or file names; only existing files are opened).
+        requirements: extra requirement strings (torch's ``Requires-Dist`` for the target).
+    """
+    reasons = []
+    for wheel in map(Path, wheels):
+        project, version = _project(wheel), _version(wheel)
+        if CUDA_PROJECTS.match(project):
+            reasons.append(f"{wheel.name} is a CUDA-only package")
+        elif project == "torch" and re.search(r"\+(cu|rocm)", version):
+            reasons.append(f"{wheel.name} is a GPU build (local version +{version.split('+')[1]})")
+        elif project == "torch" and wheel.is_file() and (cuda := torch_cuda_version(wheel)):
+            reasons.append(f"{wheel.name} is a CUDA {cuda} build (torch/version.py)")
+    for requirement in requirements:
+        name = re.split(r"[\s\[<>=!~;]", requirement.strip(), maxsplit=1)[0].lower()
+        if CUDA_PROJECTS.match(name.replace("_", "-")):
+            reasons.append(f"torch requires {requirement}")
+    if reasons:
+        raise BuildError(
+            f"refusing to bundle a CUDA build of torch for {platform}, Python {python}: "
+            + "; ".join(reasons) + ". The extension runs on the CPU: take torch from PyTorch's "
+            f"CPU index (--torch-index {TORCH_CPU_INDEX}) or from a folder holding the "
+            "torch-2.13.0+cpu wheel (--find-links DIR).")
+
+
+def torch_cuda_version(wheel: Path) -> str | None:
+    """The CUDA version a torch wheel was built for (``torch/version.py``), None for CPU."""
+    with zipfile.ZipFile(wheel) as archive:
+        try:
+            text = archive.read("torch/version.py").decode("utf-8")
+        except KeyError:
+            return None
+    match = re.search(r"(?m)^cuda\b[^=]*=\s*['\"]([^'\"]+)['\"]", text)
+    return match.group(1) if match else None
+
+
+def _wheel_tags(name: str) -> tuple[list[str], list[str], list[str]]:
+    """(python tags, abi tags, platform tags) of a wheel file name (compressed sets split)."""
+    python_tag, abi_tag, platform_tag = name[: -len(".whl")].split("-")[-3:]
+    return python_tag.split("."), abi_tag.split("."), platform_tag.split(".")
+
+
+def python_compatible(name: str, python: str) -> bool:
+    """Would Blender running CPython ``python`` install this wheel? Blender's rule
+    (``_extensions_wheel_filter_for_this_system``): a ``cpXY``/``pyXY`` tag must equal the
+    running version, ``py3``/``cp3`` matches any 3.x, and a stable-ABI (``abi3``) wheel of an
+    older 3.x also fits."""
+    current = tuple(int(x) for x in python.split("."))
+    python_tags, abi_tags, _ = _wheel_tags(name)
+    stable = any(a.startswith("abi") and a[3:].isdigit() and int(a[3:]) == current[0]
+                 for a in abi_tags)
+    for tag in python_tags:
+        match = re.fullmatch(r"(?:cp|py)(\d)(\d*)", tag)
+        if match is None:
+            continue
+        major, minor = int(match.group(1)), match.group(2)
+        if not minor and major == current[0]:
+            return True
+        if minor and ((major, int(minor)) == current
+                      or (stable and major == current[0] and int(minor) <= current[1])):
+            return True
+    return False
+
+
+def fits(name: str, platform: str, python: str) -> bool:
+    """Does a wheel file name match the platform's tags and the Python (as Blender judges)?"""
+    platform_tags = _wheel_tags(name)[2]
+    on_platform = any(t == "any" or t in PLATFORM_TAGS[platform] for t in platform_tags)
+    return on_platform and python_compatible(name, python)
+
+
+def merge_wheel_sets(per_python: dict[str, list[Path]], platform: str) -> list[Path]:
+    """One platform's wheels for every target Python, as Blender will pick from them.
+
+    Blender installs, per project, the highest version among the wheels that fit its Python.
+    Where two resolutions chose different versions of a wheel that fits both Pythons (a pure
+    or abi3 wheel), the higher one wins everywhere: it is kept only if its Requires-Python
+    admits every Python it would be installed for; the shadowed lower one is dropped.
+    """
+    SpecifierSet, Version = _packaging("specifiers").SpecifierSet, _packaging("version").Version
+    union = {w.name: w for wheels in per_python.values() for w in wheels}
+    chosen: dict[str, Path] = {}
+    for python in per_python:
+        by_project: dict[str, list[Path]] = {}
+        for wheel in union.values():
+            if fits(wheel.name, platform, python):
+                by_project.setdefault(_project(wheel), []).append(wheel)
+        for project, candidates in by_project.items():
+            best = max(candidates, key=lambda w: Version(_version(w)))
+            requires = requires_python(best)
+            if requires and not SpecifierSet(requires).contains(f"{python}.0"):
+                raise BuildError(
+                    f"{platform}: {best.name} (resolved for another Python) would be "
+                    f"installed by {PYTHONS[python]} (Python {python}) but requires Python "
+                    f"{requires}; build the Pythons separately (--python {python}).")
+            chosen[best.name] = best
+    return sorted(chosen.values(), key=lambda w: w.name)
+
+
+def requires_python(wheel: Path) -> str:
+    """The wheel's ``Requires-Python`` (empty when absent or the file does not exist)."""
+    if not wheel.is_file():
+        return ""
+    with zipfile.ZipFile(wheel) as archive:
+        names = [n for n in archive.namelist() if n.endswith(".dist-info/METADATA")]
+        text = archive.read(names[0]).decode("utf-8") if names else ""
+    match = re.search(r"(?m)^Requires-Python:\s*(.+?)\s*$", text)
+    return match.group(1) if match else ""
 
 
 #: environment-marker values of each target platform (PEP 508)
@@ -203,13 +473,10 @@ MARKER_ENVIRONMENTS = {
 }
 
 
-def _requirements_for(wheel: Path, platform: str) -> list[str]:
-    """The wheel's Requires-Dist that apply on ``platform`` with CPython 3.11 (no extras)."""
-    try:
-        from packaging.requirements import Requirement
-    except ImportError:  # pip always vendors it
-        from pip._vendor.packaging.requirements import Requirement
-    environment = {"python_version": PYTHON_VERSION, "python_full_version": f"{PYTHON_VERSION}.0",
+def _requirements_for(wheel: Path, platform: str, python: str) -> list[str]:
+    """The wheel's Requires-Dist that apply on ``platform`` with CPython ``python`` (no extras)."""
+    Requirement = _packaging("requirements").Requirement
+    environment = {"python_version": python, "python_full_version": f"{python}.0",
                    "implementation_name": "cpython", "platform_python_implementation": "CPython",
                    "extra": "", **MARKER_ENVIRONMENTS[platform]}
     with zipfile.ZipFile(wheel) as archive:
@@ -222,21 +489,23 @@ def _requirements_for(wheel: Path, platform: str) -> list[str]:
             if requirement.marker is None or requirement.marker.evaluate(environment):
                 requirement.marker = None
                 requirements.append(str(requirement))
-    return requirements
+    return list(dict.fromkeys(requirements))
 
 
-def _version(wheel: Path) -> str:
-    return wheel.name.split("-")[1]
+def _packaging(module: str):
+    """``packaging.<module>``, or pip's vendored copy (pip is always there to download)."""
+    try:
+        return importlib.import_module(f"packaging.{module}")
+    except ImportError:
+        return importlib.import_module(f"pip._vendor.packaging.{module}")
 
 
-def _fits(wheel: Path, platform: str) -> bool:
-    """Pure wheels and wheels tagged for ``platform`` (the cache may hold older downloads)."""
-    tags = wheel.name[:-len(".whl")].split("-")[-1].split(".")
-    return any(tag == "any" or tag in PLATFORM_TAGS[platform] for tag in tags)
+def _version(wheel) -> str:
+    return Path(wheel).name.split("-")[1]
 
 
-def _project(wheel: Path) -> str:
-    return wheel.name.split("-")[0].lower().replace("_", "-")
+def _project(wheel) -> str:
+    return Path(wheel).name.split("-")[0].lower().replace("_", "-")
 
 
 def copy_wheels(wheels: list[Path], dest: Path) -> None:

@@ -1,4 +1,4 @@
-"""``agndc`` command line: remesh, eval, demo, train.
+"""``agndc`` command line: remesh, batch, eval, demo, train.
 
 Every user-facing failure is an ``AGNDCError``; the CLI prints its message and exits with 2.
 """
@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from .errors import AGNDCError
-from .pipeline import MESH_ONLY_METHODS, METHODS
+from .pipeline import METHODS
 
 
 def main(argv=None) -> int:
@@ -41,13 +41,33 @@ def _parser() -> argparse.ArgumentParser:
                    help="agndc, undc (networks), surfacenets, mc, mc_taubin (no weights), "
                    "sharp (exact dual contouring of the mesh's own surface; mesh input only), "
                    "oracle (the same, named for evaluation)")
-    p.add_argument("--res", type=int, default=64, help="voxels on the longest side (mesh input)")
-    p.add_argument("--checkpoint", type=Path, help="weights (.safetensors); default: shipped")
-    p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
+    _add_remesh_options(p)
     p.add_argument("--threads", type=int, help="CPU threads for the network")
-    p.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
-    p.add_argument("--min-component-faces", type=int, default=0)
     p.set_defaults(func=_cmd_remesh)
+
+    p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
+                       "folder, resumable, on local processes or a Dask cluster",
+                       description="Each input becomes OUTDIR/<name>.<format> and a row of "
+                       "OUTDIR/batch.csv. Exit status: 0 all done, 1 some input failed, "
+                       "2 usage error. See docs/batch.md.")
+    p.add_argument("inputs", nargs="+", type=Path, metavar="INPUT",
+                   help="mesh or grid file, folder (searched recursively) or manifest "
+                   "(.txt: a path a line; .csv: an input column, optional output column)")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUTDIR")
+    p.add_argument("--format", default="ply", choices=("ply", "obj", "stl", "glb"))
+    p.add_argument("--method", choices=METHODS, default="agndc")
+    _add_remesh_options(p)
+    p.add_argument("--workers", type=int, help="worker processes (default: the CPU cores)")
+    p.add_argument("--engine", choices=("local", "dask"),
+                   help="local (a process pool; default) or dask (a Dask distributed "
+                   "cluster: --scheduler, else a LocalCluster of --workers processes)")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler, e.g. tcp://host:8786")
+    p.add_argument("--threads", type=int,
+                   help="torch threads per job (default: the cores divided by the workers)")
+    p.add_argument("--overwrite", action="store_true",
+                   help="redo outputs that already exist and are newer than their input")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_batch)
 
     p = sub.add_parser("eval", help="evaluate methods on a folder of meshes (CSV + markdown)")
     p.add_argument("folder", type=Path)
@@ -79,6 +99,19 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _add_remesh_options(p) -> None:
+    """What ``agndc remesh`` and ``agndc batch`` share (``pipeline.remesh_file``'s options)."""
+    size = p.add_mutually_exclusive_group()
+    size.add_argument("--res", type=int, default=64,
+                      help="voxels on the longest side (mesh input; grids are used as they are)")
+    size.add_argument("--voxel-size", type=float, metavar="S",
+                      help="instead of --res: voxels of at most S world units (mesh input)")
+    p.add_argument("--checkpoint", type=Path, help="weights (.safetensors); default: shipped")
+    p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
+    p.add_argument("--min-component-faces", type=int, default=0)
+
+
 def _progress_bar(desc: str):
     """A tqdm bar driven by remesh's progress(fraction, message) callback."""
     from tqdm import tqdm
@@ -94,23 +127,16 @@ def _progress_bar(desc: str):
 
 
 def _cmd_remesh(args) -> int:
-    from .gridio import is_grid_path, load_grid, load_mesh, save_mesh
-    from .pipeline import remesh, remesh_mesh
+    from .gridio import save_mesh
+    from .pipeline import remesh_file
 
     bar, update = _progress_bar(args.input.name)
-    options = dict(method=args.method, checkpoint=args.checkpoint, threads=args.threads,
-                   device=args.device, progress=update,
-                   min_component_faces=args.min_component_faces)
     try:
-        if is_grid_path(args.input):
-            if args.method in MESH_ONLY_METHODS:
-                raise AGNDCError(f"--method {args.method} needs a mesh as input (it contours "
-                                 "the mesh's own surface), not a voxel grid")
-            result = remesh(load_grid(args.input, model_index=args.model_index), **options)
-        else:
-            vertices, faces = load_mesh(args.input)
-            result = remesh_mesh(vertices, faces, resolution=args.res, source=args.input.name,
-                                 **options)
+        result = remesh_file(args.input, method=args.method, resolution=args.res,
+                             voxel_size=args.voxel_size, model_index=args.model_index,
+                             checkpoint=args.checkpoint, threads=args.threads,
+                             device=args.device, progress=update,
+                             min_component_faces=args.min_component_faces)
     finally:
         bar.close()
     save_mesh(result.vertices, result.faces, args.output)
@@ -118,6 +144,38 @@ def _cmd_remesh(args) -> int:
     print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces, "
           f"{result.method}, {result.seconds:.2f} s ({stages})")
     return 0
+
+
+def _cmd_batch(args) -> int:
+    import signal
+    import threading
+
+    from .batch import remesh_many, summary
+
+    def interrupt(signum, frame):  # kill (SIGTERM) stops like Ctrl-C: workers ended, temps gone
+        raise KeyboardInterrupt
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, interrupt) if main_thread else None
+    try:
+        rows = remesh_many(args.inputs, args.output, fmt=args.format, method=args.method,
+                           resolution=args.res, voxel_size=args.voxel_size,
+                           workers=args.workers,
+                           engine=args.engine or ("dask" if args.scheduler else "local"),
+                           scheduler=args.scheduler, overwrite=args.overwrite,
+                           progress=not args.no_progress, checkpoint=args.checkpoint,
+                           model_index=args.model_index, threads=args.threads,
+                           device=args.device, min_component_faces=args.min_component_faces)
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+    for row in rows:
+        if row["status"] == "failed":
+            print(f"FAILED {row['input']}: {row['error']}", file=sys.stderr)
+    counts = summary(rows)
+    print(f"{counts['ok']} done, {counts['skipped']} skipped (up to date), {counts['failed']} "
+          f"failed; table: {args.output / 'batch.csv'}")
+    return 1 if counts["failed"] else 0
 
 
 def _cmd_eval(args) -> int:

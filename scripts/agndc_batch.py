@@ -14,10 +14,16 @@ arguments.
 
 The add-on code is taken from, in order: an enabled AGNDC add-on, an installed AGNDC extension
 (enabled for this run), or the ``agndc_blender`` folder of the checkout this script lives in.
+
+Shared with ``agndc batch`` (``agndc_core.batch``): finding the inputs in a folder, the CSV
+table (written row by row and flushed, so a crash keeps the rows of the inputs already done)
+and the output writing (``gridio.save_mesh``: a temporary name renamed into place, never a
+partial file). The remeshing itself goes through the add-on's ``remesh_object``/``import_grid``
+(Blender objects), so its results are what the operator gives; for many files on many cores or
+a cluster, use ``agndc batch`` outside Blender.
 """
 
 import argparse
-import csv
 import importlib
 import os
 import sys
@@ -71,12 +77,9 @@ def find_addon():
                      "from a checkout of the repository")
 
 
-def list_inputs(path: Path, core) -> list[Path]:
-    gridio = core.gridio
-    if path.is_dir():
-        return sorted(p for p in path.iterdir()
-                      if p.is_file() and (gridio.is_grid_path(p) or gridio.is_mesh_path(p)))
-    return [path]
+def list_inputs(path: Path, batch) -> list[Path]:
+    """The mesh and grid files of a folder (not its subfolders), or the one file given."""
+    return batch.find_files(path, recursive=False) if path.is_dir() else [path]
 
 
 def output_path(args, source: Path, stem: str, method: str, single: bool, suffixes) -> Path:
@@ -133,6 +136,7 @@ def main(argv) -> int:
     remesh = importlib.import_module(f"{addon.__name__}.remesh")
     core = importlib.import_module(f"{addon.__name__}._core")
     mesh_io = importlib.import_module(f"{addon.__name__}.mesh_io")
+    batch = importlib.import_module(f"{core.core.__name__}.batch")  # agndc_core.batch
     addon = argparse.Namespace(remesh=remesh, core=core, mesh_io=mesh_io)
     settings = remesh.Settings(resolution=args.res, method=args.method, threads=args.threads,
                                compare_mc=args.compare_mc, checkpoint=args.checkpoint,
@@ -140,36 +144,37 @@ def main(argv) -> int:
     if not args.input.exists():
         print(f"agndc_batch: error: {args.input}: no such file or folder", file=sys.stderr)
         return 2
-    inputs = list_inputs(args.input, core)
+    inputs = list_inputs(args.input, batch)
     if not inputs:
         print(f"agndc_batch: error: no mesh or grid files in {args.input}", file=sys.stderr)
         return 2
     single = args.input.is_file()
     if not (single and args.output.suffix):
         args.output.mkdir(parents=True, exist_ok=True)
-    rows, failures = [], 0
-    for path in inputs:
-        try:
-            new_rows = process(path, args, addon, settings, single)
-        except core.errors.AGNDCError as exc:
-            failures += 1
-            print(f"FAILED {path}: {exc}", file=sys.stderr)
-            rows.append(dict(input=str(path), status="failed", error=str(exc)))
-            continue
-        except Exception as exc:  # a bug: keep going, but show the traceback and fail
-            failures += 1
-            traceback.print_exc()
-            rows.append(dict(input=str(path), status="failed", error=repr(exc)))
-            continue
-        rows += new_rows
-        for row in new_rows:
-            print(f"{row['output']}: {row['faces']} faces, {row['remesh_seconds']} s"
-                  + (f", CD {float(row['cd']) * 1e5:.2f}e-5" if row["cd"] else ""))
     csv_dir = args.output.parent if single and args.output.suffix else args.output
-    with open(csv_dir / CSV_NAME, "w", newline="", encoding="utf-8") as handle:
-        writer = csv.DictWriter(handle, CSV_FIELDS, restval="")
-        writer.writeheader()
-        writer.writerows(rows)
+    csv_dir.mkdir(parents=True, exist_ok=True)
+    table = batch.CsvLog(csv_dir / CSV_NAME, CSV_FIELDS)
+    failures = 0
+    try:
+        for path in inputs:
+            try:
+                new_rows = process(path, args, addon, settings, single)
+            except core.errors.AGNDCError as exc:
+                failures += 1
+                print(f"FAILED {path}: {exc}", file=sys.stderr)
+                table.write(dict(input=str(path), status="failed", error=str(exc)))
+                continue
+            except Exception as exc:  # a bug: keep going, but show the traceback and fail
+                failures += 1
+                traceback.print_exc()
+                table.write(dict(input=str(path), status="failed", error=repr(exc)))
+                continue
+            for row in new_rows:
+                table.write(row)
+                print(f"{row['output']}: {row['faces']} faces, {row['remesh_seconds']} s"
+                      + (f", CD {float(row['cd']) * 1e5:.2f}e-5" if row["cd"] else ""))
+    finally:
+        table.close()
     print(f"{len(inputs) - failures}/{len(inputs)} inputs done, {failures} failed; "
           f"table: {csv_dir / CSV_NAME}")
     return 1 if failures else 0

@@ -8,5 +8,5 @@ if [ ! -x .venv/bin/python ]; then
     "$PYTHON" -m venv .venv
 fi
 # torch==2.13.0 is pinned in pyproject.toml (the CPU wheel); numpy < 2 to match Blender's bpy
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -e '.[test,report]'
+.venv/bin/python -m pip install --quiet --disable-pip-version-check -e '.[test,report,dask]'
 .venv/bin/python -c "import agndc_core, torch; print('agndc_core ready, torch', torch.__version__)"

@@ -1,0 +1,557 @@
+"""Batch remeshing of many files: ``remesh_many``, behind ``agndc batch`` (and, for what needs no
+Blender object, the Blender batch script).
+
+    INPUTS --discover_inputs--> jobs --engine: run_job per file--> rows --> OUTDIR/batch.csv
+
+* **Inputs.** Files (grids ``gridio.GRID_EXTENSIONS``, meshes ``gridio.MESH_EXTENSIONS``),
+  folders (searched recursively by extension; the output folder is never searched) and
+  manifests (``.txt``/``.lst``: one path a line, ``#`` comments; ``.csv``: a first column of
+  paths, or an ``input`` column and an optional ``output`` column). Relative manifest paths are
+  relative to the manifest's folder. ``dir/sub/x.stl`` becomes ``OUTDIR/sub/x.<format>``.
+* **One job** (``run_job``) is ``pipeline.remesh_file`` (the code path of ``agndc remesh``) and
+  ``gridio.save_mesh``, which writes ``name.tmp-<pid>.<ext>`` and renames it into place, so an
+  output file is always complete. It never raises for a bad input: the error becomes a row.
+* **Resumable.** An output at least as new as its input is skipped (a "skipped" row that keeps
+  the previous run's numbers) unless ``overwrite``. Rows are appended to ``batch.csv`` and
+  flushed as each job ends, so a kill loses nothing already done; temporary files that a killed
+  run left are removed when the next run starts. A completed run rewrites the table in input
+  order.
+* **Engines.** ``"local"``: with one worker the jobs run in this process; with more, in a pool
+  of ``spawn``-ed processes, each loading the network once (``prepare_worker``) and giving torch
+  ``cores // workers`` threads. A worker that dies (out of memory, a crash in a library) fails
+  only its own file: the jobs it may have held are re-run one at a time in a fresh process.
+  ``"dask"``: the same jobs on a Dask distributed cluster (``batch_dask``).
+"""
+
+from __future__ import annotations
+
+import csv
+import multiprocessing
+import os
+import re
+import signal
+import socket
+import sys
+import threading
+import time
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import AGNDCError
+from .gridio import (
+    GRID_EXTENSIONS,
+    MESH_EXTENSIONS,
+    MESH_SAVE_EXTENSIONS,
+    TEMP_MARK,
+    is_grid_path,
+    is_mesh_path,
+    save_mesh,
+)
+from .pipeline import CHECKPOINT_NAMES, MESH_ONLY_METHODS, METHODS, remesh, remesh_file
+
+CSV_NAME = "batch.csv"
+#: columns of batch.csv: grid is the remeshed grid's shape (X x Y x Z), seconds the job's wall
+#: time, peak_rss_mb the peak resident memory of the process that ran it so far
+CSV_FIELDS = ("input", "output", "method", "grid", "faces", "vertices", "seconds", "status",
+              "error", "peak_rss_mb", "worker")
+OUTPUT_FORMATS = tuple(ext[1:] for ext in MESH_SAVE_EXTENSIONS)  # ply, obj, stl, glb
+MANIFEST_EXTENSIONS = (".txt", ".lst", ".csv")
+ENGINES = ("local", "dask")
+#: jobs handed to a local pool per worker at a time: enough to keep every worker busy, few
+#: enough that a dying worker leaves a short list of suspects
+IN_FLIGHT_PER_WORKER = 2
+_TEMP_NAME = re.compile(re.escape(TEMP_MARK) + r"\d+\.")
+_PREPARED: dict = {}  # per process: the (options, threads) a worker was prepared for
+
+
+@dataclass(frozen=True)
+class BatchOptions:
+    """How every file of a batch is remeshed (``pipeline.remesh_file`` arguments; picklable)."""
+
+    method: str = "agndc"
+    resolution: int = 64  # voxels on a mesh's longest side (grids are used as they are)
+    voxel_size: float | None = None  # instead of resolution: voxels of at most this size
+    model_index: int = 0  # .vox files: which model
+    checkpoint: str | None = None  # learned methods: None = the shipped weights
+    device: str = "cpu"
+    min_component_faces: int = 0
+    threads: int | None = None  # torch threads per job; None = the worker's share of the cores
+
+
+@dataclass(frozen=True)
+class Job:
+    """One input file and the output file it becomes (absolute paths, so any worker can use
+    them on a shared filesystem)."""
+
+    input: str
+    output: str
+
+
+# --- inputs ---------------------------------------------------------------------------------
+
+
+def discover_inputs(inputs, out_dir, *, fmt: str = "ply", recursive: bool = True) -> list[Job]:
+    """Jobs for files, folders and manifests, in the given order (folders sorted).
+
+    Raises AGNDCError (a usage error) for a missing path, an unsupported file, no input at all,
+    or two inputs that would write the same output.
+    """
+    out_dir = Path(out_dir).absolute()
+    jobs = []
+    for item in inputs:
+        jobs += _expand(Path(item), out_dir, fmt, recursive, listed=False)
+    if not jobs:
+        names = ", ".join(str(item) for item in inputs)
+        raise AGNDCError(f"no mesh or grid files in {names or 'the inputs'}")
+    return _unique(jobs)
+
+
+def find_files(folder, *, recursive: bool = True, exclude=None) -> list[Path]:
+    """Mesh and grid files in ``folder`` (sorted), without temporary files and ``exclude``'s
+    subtree (the output folder, so outputs are never read back as inputs)."""
+    folder, found = Path(folder), []
+    skip = Path(exclude).resolve() if exclude is not None else None
+    for root, dirs, files in os.walk(folder):
+        dirs[:] = sorted(d for d in dirs if recursive and Path(root, d).resolve() != skip)
+        found += [Path(root, name) for name in files
+                  if (is_grid_path(name) or is_mesh_path(name)) and not _TEMP_NAME.search(name)]
+    return sorted(found)
+
+
+def read_manifest(path) -> list[tuple[Path, str | None]]:
+    """(input path, output name or None) per manifest entry, inputs relative to its folder."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise AGNDCError(f"{path}: cannot read the manifest ({exc})") from None
+    if path.suffix.lower() == ".csv":
+        rows = [row for row in csv.reader(text.splitlines()) if row and row[0].strip()]
+    else:
+        rows = [[line.strip()] for line in text.splitlines()]
+    header = [cell.strip().lower() for cell in rows[0]] if rows else []
+    column = {"input": 0, "output": None}
+    if "input" in header:
+        column = {"input": header.index("input"),
+                  "output": header.index("output") if "output" in header else None}
+        rows = rows[1:]
+    entries = []
+    for row in rows:
+        name = row[column["input"]].strip() if len(row) > column["input"] else ""
+        if not name or name.startswith("#"):
+            continue
+        out = column["output"]
+        output = (row[out].strip() or None) if out is not None and len(row) > out else None
+        entries.append((path.parent / Path(name).expanduser(), output))
+    return entries
+
+
+def output_name(relative, fmt: str) -> Path:
+    """``sub/x.nii.gz`` -> ``sub/x.<fmt>``: the input's relative path with the mesh extension."""
+    relative = Path(relative)
+    name = relative.name
+    ext = max((e for e in GRID_EXTENSIONS + MESH_EXTENSIONS if name.lower().endswith(e)),
+              key=len, default=relative.suffix)
+    return relative.with_name(f"{name[:len(name) - len(ext)] or name}.{fmt}")
+
+
+def _expand(path: Path, out_dir: Path, fmt: str, recursive: bool, listed: bool) -> list[Job]:
+    """Jobs for one command-line item (``listed=False``) or one manifest entry (True)."""
+    if path.is_dir():
+        if path.resolve() == out_dir.resolve():
+            raise AGNDCError(f"{path}: the output folder cannot also be an input folder")
+        return [_job(p, out_dir / output_name(p.relative_to(path), fmt))
+                for p in find_files(path, recursive=recursive, exclude=out_dir)]
+    if path.suffix.lower() in MANIFEST_EXTENSIONS and not listed:
+        if not path.is_file():
+            raise AGNDCError(f"{path}: no such manifest")
+        return [job for entry, output in read_manifest(path)
+                for job in ([_job(entry, out_dir / output)] if output else
+                            _expand(entry, out_dir, fmt, recursive, listed=True))]
+    if not listed:  # a manifest's missing or odd entry is that file's failed row instead
+        if not path.exists():
+            raise AGNDCError(f"{path}: no such file or folder")
+        if not (is_grid_path(path) or is_mesh_path(path)):
+            raise AGNDCError(f"{path}: not a mesh ({', '.join(MESH_EXTENSIONS)}), a grid "
+                             f"({', '.join(GRID_EXTENSIONS)}) or a manifest "
+                             f"({', '.join(MANIFEST_EXTENSIONS)})")
+    return [_job(path, out_dir / output_name(path.name, fmt))]
+
+
+def _job(source: Path, output: Path) -> Job:
+    return Job(os.path.abspath(source), os.path.abspath(output))
+
+
+def _unique(jobs: list[Job]) -> list[Job]:
+    """Drop repeated jobs; refuse an input that is its own output, or two inputs that map to one
+    output."""
+    by_output: dict[str, Job] = {}
+    for job in jobs:
+        if job.input == job.output:
+            raise AGNDCError(f"{job.input}: its output would replace it; choose another output "
+                             "folder or --format")
+        other = by_output.setdefault(job.output, job)
+        if other.input != job.input:
+            raise AGNDCError(f"{other.input} and {job.input} would both be written to "
+                             f"{job.output}; rename one or list them with an output column "
+                             "in a CSV manifest")
+    return list(by_output.values())
+
+
+# --- one job --------------------------------------------------------------------------------
+
+
+def run_job(job: Job, options: BatchOptions) -> dict:
+    """Remesh one file and write its output; a row for batch.csv. Bad input is a failed row.
+
+    The output is written through ``gridio.save_mesh`` (temporary name, then an atomic rename).
+    KeyboardInterrupt and other BaseExceptions propagate (nothing partial is left behind).
+    """
+    start = time.perf_counter()
+    row = {"input": job.input, "output": job.output, "method": options.method}
+    try:
+        result = remesh_file(job.input, method=options.method, resolution=options.resolution,
+                             voxel_size=options.voxel_size, model_index=options.model_index,
+                             checkpoint=options.checkpoint, threads=options.threads,
+                             device=options.device,
+                             min_component_faces=options.min_component_faces)
+        Path(job.output).parent.mkdir(parents=True, exist_ok=True)
+        save_mesh(result.vertices, result.faces, job.output)
+        row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),
+                   vertices=len(result.vertices), status="ok", error="")
+    except AGNDCError as exc:
+        row.update(status="failed", error=str(exc))
+    except Exception as exc:  # a bug or a library's surprise: still only this file's failure
+        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+    row.update(seconds=f"{time.perf_counter() - start:.3f}", **_process_stats())
+    return row
+
+
+def failed_row(job: Job, options: BatchOptions, error: str) -> dict:
+    """The row of a job that ended without its own row (its worker died)."""
+    return {"input": job.input, "output": job.output, "method": options.method,
+            "status": "failed", "error": error}
+
+
+def is_done(job: Job) -> bool:
+    """True when the job's output exists and is at least as new as its input."""
+    try:
+        return os.stat(job.output).st_mtime_ns >= os.stat(job.input).st_mtime_ns
+    except OSError:
+        return False
+
+
+def prepare_worker(options: BatchOptions, threads: int | None) -> None:
+    """Once per worker process: torch's share of the cores, and a warm-up remesh of a 2x2x2
+    grid, which imports what the method needs and loads its network into ``pipeline``'s
+    per-process model cache, so no job loads or receives it again (and a job's seconds are its
+    own work)."""
+    key = (options, threads)
+    if _PREPARED.get("key") == key:
+        return
+    if options.method not in MESH_ONLY_METHODS:  # those need a mesh: nothing to warm up
+        remesh(np.ones((2, 2, 2), dtype=bool), method=options.method,
+               checkpoint=options.checkpoint, device=options.device)
+    if threads and "torch" in sys.modules:  # marching cubes never imports torch
+        sys.modules["torch"].set_num_threads(int(threads))
+    _PREPARED["key"] = key
+
+
+def _default_checkpoint(method: str) -> Path:
+    from .checkpoint import default_checkpoint_path
+
+    return default_checkpoint_path(CHECKPOINT_NAMES[method])
+
+
+def _process_stats() -> dict:
+    """Peak resident memory (MB) of this process so far ("" where the OS does not say), and
+    which process this is (host:pid)."""
+    return {"peak_rss_mb": _peak_rss_mb(), "worker": f"{socket.gethostname()}:{os.getpid()}"}
+
+
+def _peak_rss_mb() -> str:
+    # Linux: VmHWM is this process image's own peak; getrusage's ru_maxrss would also count
+    # the parent's memory at fork, which a spawned worker inherits across exec
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("VmHWM:"):
+                    return f"{int(line.split()[1]) / 1024:.0f}"  # kB
+    except OSError:
+        pass
+    try:
+        import resource  # POSIX only
+    except ImportError:
+        return ""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # macOS: bytes, else KiB
+    return f"{peak / (1 << 20 if sys.platform == 'darwin' else 1024):.0f}"
+
+
+def cpu_count() -> int:
+    """CPU cores this process may use (its affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+# --- engines --------------------------------------------------------------------------------
+
+
+def run_serial(jobs, options: BatchOptions, on_row, func=run_job) -> None:
+    """Every job in this process, one after another."""
+    for job in jobs:
+        on_row(func(job, options))
+
+
+def run_pool(jobs, options: BatchOptions, workers: int, on_row, func=run_job) -> None:
+    """Every job in a pool of ``workers`` processes; ``on_row`` (in this process) gets the rows.
+
+    At most ``IN_FLIGHT_PER_WORKER * workers`` jobs are handed out at a time. When a worker dies
+    the pool breaks; the jobs that were handed out are then re-run one by one, each alone in a
+    fresh process, so only the file that kills its worker gets a failed row. Ctrl-C terminates
+    the workers (their temporary files are swept by ``remesh_many``) and propagates.
+    """
+    threads = options.threads or max(1, cpu_count() // workers)
+    todo, running = deque(jobs), {}
+    pool = _new_pool(workers, options, threads)
+    try:
+        while todo or running:
+            while todo and len(running) < IN_FLIGHT_PER_WORKER * workers:
+                job = todo.popleft()
+                running[pool.submit(func, job, options)] = job
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            broken = False
+            for future in done:
+                job = running.pop(future)
+                try:
+                    on_row(future.result())
+                except BrokenProcessPool:
+                    running[future] = job  # a suspect: re-run below
+                    broken = True
+                except Exception as exc:
+                    on_row(failed_row(job, options, f"{type(exc).__name__}: {exc}"))
+            if broken:
+                pool.shutdown(wait=True)
+                for job in list(running.values()):
+                    on_row(_run_alone(job, options, threads, func))
+                running.clear()
+                pool = _new_pool(workers, options, threads)
+    except BaseException:
+        _terminate(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _new_pool(workers: int, options: BatchOptions, threads: int) -> ProcessPoolExecutor:
+    # spawn, not fork: a forked copy of a process that has started torch's thread pools can hang
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_init_pool_worker,
+                               initargs=(options, threads, os.getpid()))
+
+
+def _run_alone(job: Job, options: BatchOptions, threads: int, func) -> dict:
+    """A suspect job of a broken pool, alone in a fresh process: its row, or a failed row if
+    that process dies too."""
+    pool = _new_pool(1, options, threads)
+    try:
+        return pool.submit(func, job, options).result()
+    except BrokenProcessPool:
+        return failed_row(job, options, "the worker process died while remeshing this file "
+                          "(out of memory? a crash in a library?)")
+    except BaseException:
+        _terminate(pool)
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _init_pool_worker(options: BatchOptions, threads: int, parent_pid: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    _exit_with_parent(parent_pid)
+    try:
+        prepare_worker(options, threads)
+    except AGNDCError:
+        # an initializer that raises breaks the whole pool; each job meets the same error
+        # (an unreadable checkpoint, say) in remesh and reports it in its own row instead
+        pass
+
+
+def _exit_with_parent(parent_pid: int) -> None:
+    """End this worker when the batch process is gone (killed: no one else would end it)."""
+
+    def watch():
+        while os.getppid() == parent_pid:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="agndc-parent-watch", daemon=True).start()
+
+
+def _terminate(pool: ProcessPoolExecutor) -> None:
+    # Python 3.14 has terminate_workers(); before that the processes are only reachable here
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        process.terminate()
+
+
+def remove_temp_files(folder) -> int:
+    """Delete the ``*.tmp-<pid>.*`` files a killed writer left under ``folder``; their count."""
+    removed = 0
+    for root, _, files in os.walk(folder):
+        for name in files:
+            if _TEMP_NAME.search(name):
+                Path(root, name).unlink(missing_ok=True)
+                removed += 1
+    return removed
+
+
+# --- the table and the public entry point ---------------------------------------------------
+
+
+class CsvLog:
+    """``batch.csv``, written one row at a time and flushed, so a kill loses no finished row."""
+
+    def __init__(self, path, fields=CSV_FIELDS):
+        self.path = Path(path)
+        self._file = self.path.open("w", newline="", encoding="utf-8")
+        self._writer = csv.DictWriter(self._file, fields, restval="", extrasaction="ignore")
+        self._writer.writeheader()
+        self._file.flush()
+
+    def write(self, row: dict) -> None:
+        self._writer.writerow(row)
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read_rows(path) -> list[dict]:
+    """The rows of a batch.csv ([] when there is none or it cannot be read)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            return list(csv.DictReader(handle))
+    except (OSError, csv.Error, UnicodeDecodeError):
+        return []
+
+
+def write_rows(path, rows, fields=CSV_FIELDS) -> None:
+    """Write a whole table through a temporary name and an atomic rename."""
+    path = Path(path)
+    temp = path.with_name(f"{path.name}{TEMP_MARK}{os.getpid()}.csv")
+    with temp.open("w", newline="", encoding="utf-8") as handle:
+        writer = csv.DictWriter(handle, fields, restval="", extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    os.replace(temp, path)
+
+
+def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
+                resolution: int = 64, voxel_size: float | None = None,
+                workers: int | None = None, engine: str = "local", scheduler: str | None = None,
+                overwrite: bool = False, progress: bool = False, **options) -> list[dict]:
+    """Remesh every input (files, folders, manifests) into ``out_dir``; the rows of batch.csv.
+
+    Args:
+        inputs: paths of files, folders (recursive) and manifests; see the module docstring.
+        out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
+        fmt: "ply", "obj", "stl" or "glb".
+        method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
+            min_component_faces, threads): as for ``pipeline.remesh_file`` / ``agndc remesh``.
+        workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
+        engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).
+        overwrite: redo outputs that are already there and up to date.
+        progress: show a tqdm bar (files/s, ETA) on stderr.
+
+    Returns:
+        One dict per input, in input order, with the CSV_FIELDS keys; status "ok", "failed"
+        (error says why) or "skipped". Bad inputs never raise; bad arguments raise AGNDCError.
+    """
+    if options.get("checkpoint"):  # absolute: workers may run in another folder or host
+        options["checkpoint"] = os.path.abspath(options["checkpoint"])
+    batch = BatchOptions(method=method, resolution=resolution, voxel_size=voxel_size, **options)
+    workers = cpu_count() if workers is None else workers
+    _check_arguments(batch, fmt, workers, engine, scheduler)
+    out_dir = Path(out_dir)
+    jobs = discover_inputs(inputs, out_dir, fmt=fmt)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    remove_temp_files(out_dir)
+    previous = {row.get("output"): row for row in read_rows(out_dir / CSV_NAME)}
+    rows: dict[str, dict] = {}
+    log = CsvLog(out_dir / CSV_NAME)
+    todo = []
+    for job in jobs:
+        if overwrite or not is_done(job):
+            todo.append(job)
+        else:
+            rows[job.output] = _skipped_row(job, previous.get(job.output))
+            log.write(rows[job.output])
+    bar = _progress_bar(len(todo), len(jobs) - len(todo), enabled=progress)
+
+    def on_row(row: dict) -> None:
+        rows[row["output"]] = row
+        log.write(row)
+        bar.update(1)
+        if row["status"] == "failed":
+            bar.set_postfix(failed=sum(r["status"] == "failed" for r in rows.values()))
+
+    try:
+        if engine == "dask":
+            from .batch_dask import run_dask
+
+            run_dask(todo, batch, workers, scheduler, on_row)
+        elif workers == 1 or len(todo) <= 1:
+            run_serial(todo, batch, on_row)
+        else:
+            run_pool(todo, batch, min(workers, len(todo)), on_row)
+    finally:
+        bar.close()
+        log.close()
+        remove_temp_files(out_dir)
+    ordered = [rows[job.output] for job in jobs]
+    write_rows(out_dir / CSV_NAME, ordered)
+    return ordered
+
+
+def _check_arguments(options: BatchOptions, fmt, workers, engine, scheduler) -> None:
+    if fmt not in OUTPUT_FORMATS:
+        raise AGNDCError(f"output format {fmt!r}: choose one of {', '.join(OUTPUT_FORMATS)}")
+    if options.method not in METHODS:
+        raise AGNDCError(f"unknown method {options.method!r}; choose one of {', '.join(METHODS)}")
+    if engine not in ENGINES:
+        raise AGNDCError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    if scheduler and engine != "dask":
+        raise AGNDCError("a scheduler address needs the dask engine (--engine dask)")
+    if workers < 1:
+        raise AGNDCError(f"workers must be at least 1, got {workers}")
+    if options.voxel_size is not None and not options.voxel_size > 0:
+        raise AGNDCError(f"voxel size must be positive, got {options.voxel_size}")
+    if options.method in CHECKPOINT_NAMES:  # fail before the workers start, not once per file
+        checkpoint = Path(options.checkpoint or _default_checkpoint(options.method))
+        if not checkpoint.is_file():
+            raise AGNDCError(f"checkpoint not found: {checkpoint}")
+
+
+def _skipped_row(job: Job, previous: dict | None) -> dict:
+    """A skipped job's row: the previous run's numbers for it, if batch.csv had them."""
+    row = dict(previous or {}, input=job.input, output=job.output, status="skipped", error="")
+    return {key: row.get(key, "") for key in CSV_FIELDS}
+
+
+def _progress_bar(total: int, skipped: int, *, enabled: bool):
+    from tqdm import tqdm
+
+    desc = f"agndc batch ({skipped} skipped)" if skipped else "agndc batch"
+    return tqdm(total=total, desc=desc, unit="file", disable=not enabled, smoothing=0.1)
+
+
+def summary(rows: list[dict]) -> dict:
+    """Counts per status: {"ok": n, "failed": n, "skipped": n}."""
+    return {status: sum(row["status"] == status for row in rows)
+            for status in ("ok", "failed", "skipped")}
+
