@@ -9,7 +9,8 @@ bl_info = {
     "author": "AGNDC Remesher developers",
     "version": (0, 1, 0),
     "blender": (4, 2, 0),
-    "location": "View3D > Sidebar > AGNDC, Object > Remesh with AGNDC, File > Import",
+    "location": "View3D > Sidebar > AGNDC, Object > Remesh with AGNDC, File > Import, "
+                "drag and drop",
     "description": "Neural dual contouring: voxel grids and meshes to clean meshes",
     "category": "Mesh",
 }
@@ -23,6 +24,7 @@ classes = (
     properties.AGNDC_RemeshSettings,
     operators.OBJECT_OT_agndc_remesh,
     operators.IMPORT_MESH_OT_agndc_grid,
+    operators.AGNDC_FH_voxel_grid,
     panels.VIEW3D_PT_agndc_remesh,
 )
 

@@ -2,17 +2,24 @@
 
 In the built extension the core is vendored beside this file (``<extension>/agndc_core``) and
 is imported relatively; in a development checkout it is the ``pip install -e .`` package. The
-rest of the add-on does ``from ._core import core, pipeline, ...`` and never touches ``sys.path``.
-Importing this module imports numpy/scipy (not torch: the core loads torch on first use).
+rest of the add-on does ``from ._core import pipeline, ...`` and never touches ``sys.path``.
+
+Modules are imported on first use (PEP 562), so registering the add-on imports only what the
+properties need (``plan``: numpy); scipy comes with ``gridio``/``metrics``/``pipeline`` and torch
+with the first network run.
 """
 
+import importlib
 from importlib.util import find_spec
 
-if find_spec(f"{__package__}.agndc_core") is not None:  # built extension: vendored copy
-    from . import agndc_core as core
-    from .agndc_core import errors, gridio, metrics, pipeline
-else:  # development checkout: the installed package
-    import agndc_core as core
-    from agndc_core import errors, gridio, metrics, pipeline
+#: the package the core is imported from: vendored in the built extension, else installed
+BASE = (f"{__package__}.agndc_core" if find_spec(f"{__package__}.agndc_core") is not None
+        else "agndc_core")
+MODULES = ("errors", "gridio", "metrics", "pipeline", "plan")
 
-__all__ = ["core", "errors", "gridio", "metrics", "pipeline"]
+def __getattr__(name):
+    if name == "core":
+        return importlib.import_module(BASE)
+    if name in MODULES:
+        return importlib.import_module(f"{BASE}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

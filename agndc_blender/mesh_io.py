@@ -4,21 +4,37 @@
 import bpy
 import numpy as np
 
+#: object types whose bounding boxes results must not land on
+SOLID_TYPES = {"MESH", "CURVE", "SURFACE", "META", "FONT", "VOLUME", "CURVES", "POINTCLOUD",
+               "GPENCIL", "GREASEPENCIL"}
 
-def read_mesh(obj) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulated copy of an object's mesh data in its own (local) coordinates.
 
-    Modifiers are ignored, as in Blender's own Voxel Remesh. Nothing on ``obj`` is changed
-    (``calc_loop_triangles`` only fills a runtime cache).
+def read_mesh(obj, use_modifiers: bool = True, depsgraph=None):
+    """Triangulated copy of an object's mesh in its own (local) coordinates.
+
+    Args:
+        use_modifiers: the evaluated mesh (modifiers applied, what the viewport shows); False:
+            the base mesh, as Blender's own Voxel Remesh. Nothing on ``obj`` is changed.
 
     Returns:
-        vertices: (V, 3) float64; faces: (F, 3) int64 (F = 0 for a mesh without faces).
+        vertices: (V, 3) float64; faces: (F, 3) int64 (F = 0 for a mesh without faces);
+        materials: (F,) int32 material slot of each triangle.
     """
-    return mesh_arrays(obj.data)
+    if not use_modifiers:
+        return mesh_arrays(obj.data, materials=True)
+    depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+    evaluated = obj.evaluated_get(depsgraph)
+    mesh = evaluated.to_mesh()
+    try:
+        return mesh_arrays(mesh, materials=True)
+    finally:
+        evaluated.to_mesh_clear()
 
 
-def new_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> "bpy.types.Mesh":
-    """A new mesh datablock from (V, 3) float vertices and (F, 3) int triangles."""
+def new_mesh(name: str, vertices: np.ndarray, faces: np.ndarray,
+             materials: np.ndarray | None = None) -> "bpy.types.Mesh":
+    """A new mesh datablock from (V, 3) float vertices and (F, 3) int triangles, with an optional
+    (F,) material slot per triangle."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
     mesh = bpy.data.meshes.new(name)
@@ -29,19 +45,37 @@ def new_mesh(name: str, vertices: np.ndarray, faces: np.ndarray) -> "bpy.types.M
     mesh.polygons.add(len(faces))
     mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
     mesh.polygons.foreach_set("loop_total", np.full(len(faces), 3, dtype=np.int32))
+    if materials is not None and len(faces):
+        mesh.polygons.foreach_set("material_index",
+                                  np.ascontiguousarray(materials, dtype=np.int32).reshape(-1))
     mesh.update(calc_edges=True)
     mesh.validate(verbose=False)
     return mesh
 
 
-def mesh_arrays(mesh) -> tuple[np.ndarray, np.ndarray]:
-    """(V, 3) float64 vertices and (F, 3) int64 triangles (n-gons triangulated) of a mesh."""
+def mesh_arrays(mesh, materials: bool = False):
+    """(V, 3) float64 vertices and (F, 3) int64 triangles (n-gons triangulated) of a mesh, and
+    with ``materials`` the (F,) int32 material slot of each triangle."""
     coords = np.zeros(len(mesh.vertices) * 3, dtype=np.float32)  # (V*3,)
     mesh.vertices.foreach_get("co", coords)
     mesh.calc_loop_triangles()
     tris = np.zeros(len(mesh.loop_triangles) * 3, dtype=np.int32)  # (F*3,)
     mesh.loop_triangles.foreach_get("vertices", tris)
-    return coords.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3).astype(np.int64)
+    arrays = coords.reshape(-1, 3).astype(np.float64), tris.reshape(-1, 3).astype(np.int64)
+    if not materials:
+        return arrays
+    slots = np.zeros(len(mesh.loop_triangles), dtype=np.int32)  # (F,)
+    mesh.loop_triangles.foreach_get("material_index", slots)
+    return (*arrays, slots)
+
+
+def polygon_areas(mesh) -> np.ndarray:
+    """(P, 3) float64: each polygon's unit normal times its area (local coordinates)."""
+    normals = np.zeros(len(mesh.polygons) * 3, dtype=np.float32)
+    mesh.polygons.foreach_get("normal", normals)
+    areas = np.zeros(len(mesh.polygons), dtype=np.float32)
+    mesh.polygons.foreach_get("area", areas)
+    return normals.reshape(-1, 3).astype(np.float64) * areas[:, None]
 
 
 def set_smooth(mesh, smooth: bool) -> None:
@@ -53,8 +87,25 @@ def set_smooth(mesh, smooth: bool) -> None:
 
 
 def world_bounds(obj) -> tuple[np.ndarray, np.ndarray]:
-    """(3,) min and max of the object's bounding box in world coordinates."""
-    corners = np.array([tuple(c) for c in obj.bound_box], dtype=np.float64)  # (8, 3) local
-    matrix = np.array(obj.matrix_world, dtype=np.float64)  # (4, 4)
+    """(3,) min and max of the object's (evaluated) bounding box in world coordinates."""
+    return box_bounds(local_box(obj), np.array(obj.matrix_world, dtype=np.float64))
+
+
+def local_box(obj) -> np.ndarray:
+    """(8, 3) corners of the object's bounding box in its local coordinates."""
+    return np.array([tuple(c) for c in obj.bound_box], dtype=np.float64)
+
+
+def box_bounds(corners: np.ndarray, matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) min and max of (N, 3) local points under a (4, 4) matrix."""
     world = corners @ matrix[:3, :3].T + matrix[:3, 3]
     return world.min(axis=0), world.max(axis=0)
+
+
+def solid_bounds(scene, exclude=()) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 3) min and max corners of the world bounding boxes of the scene's solid objects."""
+    boxes = [world_bounds(obj) for obj in scene.objects
+             if obj.type in SOLID_TYPES and obj.name not in exclude]
+    if not boxes:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    return np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])

@@ -1,9 +1,29 @@
-"""UI: the sidebar tab, plus draw hooks for Object Data > Remesh, the Object menu (so F3 finds
-the operator) and File > Import. Drawing only; the work is in operators.py."""
+"""UI: the sidebar tab (settings, the grid and time a run will take, the progress bar of a
+running one, help), plus draw hooks for Object Data > Remesh, the Object menu (so F3 finds the
+operator) and File > Import. Drawing only; the work is in operators.py and remesh.py."""
+
+from functools import lru_cache
+from pathlib import Path
 
 import bpy
+import numpy as np
 
-from .operators import IMPORT_MESH_OT_agndc_grid, OBJECT_OT_agndc_remesh
+from . import mesh_io
+from .operators import (
+    RUN,
+    IMPORT_MESH_OT_agndc_grid,
+    OBJECT_OT_agndc_remesh,
+    draw_settings,
+    format_seconds,
+)
+
+#: where the manifest is: inside the built extension, or at the root of a checkout
+MANIFESTS = (Path(__file__).parent / "blender_manifest.toml",
+             Path(__file__).parents[1] / "blender_manifest.toml")
+#: the sidebar estimates at most this many selected objects (each needs its mesh's areas)
+PREVIEW_OBJECTS = 16
+
+_preview_cache: dict = {}
 
 
 class VIEW3D_PT_agndc_remesh(bpy.types.Panel):
@@ -14,24 +34,99 @@ class VIEW3D_PT_agndc_remesh(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         settings = context.scene.agndc
-        col = layout.column()
-        col.prop(settings, "resolution")
-        col.prop(settings, "method")
-        col.prop(settings, "threads")
-        col.prop(settings, "compare_mc")
-        col.prop(settings, "smooth")
+        if RUN.active:
+            col = layout.column(align=True)
+            col.progress(factor=RUN.fraction, type="BAR", text=f"{RUN.fraction:.0%}")
+            col.label(text=RUN.message)
+            col.label(text="Cancelling..." if RUN.cancelling else "Esc: cancel", icon="CANCEL")
+        draw_settings(layout.column(), settings, mesh=True)
+        _draw_preview(layout, context, settings)
         _draw_weights_status(layout, settings.method)
         col = layout.column(align=True)
         col.operator(OBJECT_OT_agndc_remesh.bl_idname, icon="MOD_REMESH")
         col.operator(IMPORT_MESH_OT_agndc_grid.bl_idname, text="Import Voxel Grid...",
                      icon="IMPORT")
+        url = help_url()
+        if url:
+            layout.operator("wm.url_open", text="Help", icon="HELP").url = url
+
+
+@lru_cache(maxsize=1)
+def help_url() -> str:
+    """The manifest's ``website`` (the one place the documentation URL is written), or "" (then
+    the panel shows no Help button)."""
+    import tomllib
+
+    for path in MANIFESTS:
+        if path.is_file():
+            with open(path, "rb") as handle:
+                return str(tomllib.load(handle).get("website", ""))
+    return ""
+
+
+def _draw_preview(layout, context, settings) -> None:
+    """The grid each selected mesh gets and the estimated time of the run (or why it fails)."""
+    meshes = [obj for obj in context.selected_objects if obj.type == "MESH"]
+    if not meshes:
+        layout.label(text="Select mesh objects to remesh", icon="INFO")
+        return
+    box = layout.box().column(align=True)
+    total = 0.0
+    for obj in meshes[:PREVIEW_OBJECTS]:
+        shape, seconds, problem = preview(obj, settings, context)
+        if problem:
+            box.label(text=f"{obj.name}: {problem}", icon="ERROR")
+            continue
+        total += seconds
+        box.label(text=f"{obj.name}: {' × '.join(map(str, shape))} voxels")
+    if len(meshes) > PREVIEW_OBJECTS:
+        box.label(text=f"... and {len(meshes) - PREVIEW_OBJECTS} more")
+    box.label(text=f"Estimated time: {format_seconds(total)}", icon="TIME")
+
+
+def preview(obj, settings, context):
+    """(grid shape, estimated seconds, problem text or "") of remeshing ``obj`` now; cached
+    per object, mesh size, transform and settings, so redraws stay cheap."""
+    from ._core import errors, plan
+    from .remesh import frame_of
+
+    evaluated = obj.evaluated_get(context.evaluated_depsgraph_get()) \
+        if settings.use_modifiers else obj
+    mesh = evaluated.data
+    key = (obj.name, mesh.as_pointer(), len(mesh.vertices), len(mesh.polygons),
+           tuple(map(tuple, obj.matrix_world)), settings.size_mode, settings.voxel_size,
+           settings.resolution, settings.method, settings.compare_mc, settings.output)
+    if key in _preview_cache:
+        return _preview_cache[key]
+    if len(_preview_cache) > 256:
+        _preview_cache.clear()
+    try:
+        frame, world_per_unit = frame_of(np.array(obj.matrix_world))
+        corners = mesh_io.local_box(evaluated) * frame
+        extent = np.ptp(corners, axis=0) * world_per_unit
+        by_size = settings.size_mode == "VOXEL_SIZE"
+        grid = plan.plan_grid(extent, voxel_size=settings.voxel_size if by_size else None,
+                              resolution=None if by_size else settings.resolution,
+                              source=obj.name)
+        # area vectors in the voxelised frame, in world units: the cofactor of the scale
+        scale = frame * world_per_unit
+        cofactor = np.array([scale[1] * scale[2], scale[0] * scale[2], scale[0] * scale[1]])
+        crossings = plan.area_crossings(mesh_io.polygon_areas(mesh) * cofactor, grid.voxel_size)
+        methods = [settings.method]
+        if settings.compare_mc and settings.method != "mc" and settings.output != "REPLACE":
+            methods.append("mc")
+        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1)
+                      for m in methods)
+        result = (grid.shape, seconds, "")
+    except errors.AGNDCError as exc:
+        result = ((), 0.0, str(exc).removeprefix(f"{obj.name}: "))
+    _preview_cache[key] = result
+    return result
 
 
 def _draw_weights_status(layout, method):
-    """One line saying whether the chosen model's weights are there (nothing for MC)."""
+    """One line saying whether the chosen model's weights are there (nothing for MC, sharp)."""
     try:
         from . import preferences, remesh
     except ImportError as exc:

@@ -1,54 +1,121 @@
 """Settings shared by the sidebar, the Object Data > Remesh button and the operators: one
-PropertyGroup behind ``Scene.agndc``. Operator properties of the same names override them."""
+PropertyGroup behind ``Scene.agndc``. Operator properties of the same names override them.
+
+Limits are the core's (``agndc_core.plan``), as hard limits, so a value the core would refuse
+cannot be typed."""
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
-#: resolution limits: the operator validates these (with a clear message) instead of clamping
-RESOLUTION_MIN, RESOLUTION_DEFAULT, RESOLUTION_MAX = 8, 64, 256
+from ._core import plan
+
+RESOLUTION_MIN, RESOLUTION_DEFAULT, RESOLUTION_MAX = plan.RESOLUTION_MIN, 64, plan.RESOLUTION_MAX
+#: default voxel size in world units: the default 2 m cube becomes a 42³ grid
+VOXEL_SIZE_DEFAULT = 0.05
+#: smallest voxel size that can be typed; finer sizes still fail per object against
+#: RESOLUTION_MAX and grid.MAX_VOXELS, with a message naming the size that works
+VOXEL_SIZE_MIN = 1e-5
 
 METHOD_ITEMS = (
     ("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring (shipped weights)"),
     ("undc", "UNDC", "Single-scale neural dual contouring baseline (needs its weights)"),
     ("mc", "Marching Cubes", "Marching cubes of the same grid (no network)"),
+    ("sharp", "Sharp (exact dual contouring)",
+     "Dual contouring of the mesh's own exact intersections and normals: flat faces and sharp "
+     "edges (meshes only; no network)"),
+)
+#: methods of the grid importer: a grid alone has no exact surface to contour
+GRID_METHOD_ITEMS = METHOD_ITEMS[:3]
+
+SIZE_MODE_ITEMS = (
+    ("VOXEL_SIZE", "Voxel Size", "Voxel edge in world units, as in Blender's Voxel Remesh"),
+    ("RESOLUTION", "Resolution", "Voxels along the longest side of each object"),
 )
 
+OUTPUT_ITEMS = (
+    ("BESIDE", "Beside Source",
+     "New objects beside the source, in the 'AGNDC Results' collection; the source stays"),
+    ("REPLACE", "Replace Source",
+     "The result takes the source's place (same transform, parent and collections); the source "
+     "is hidden, not deleted (Ctrl Z undoes)"),
+)
+
+VOX_ITEMS = (
+    ("INDEX", "One Model", "Import the model at Model Index"),
+    ("ALL", "All Models", "Import every model of the file as its own object"),
+)
+
+
+#: options of the operators' copies of the settings: never remembered from the last call, so a
+#: button press always takes the sidebar's current settings (a script's arguments still win)
+OPERATOR = {"options": {"SKIP_SAVE"}}
+
+
 # Shared definitions, so the PropertyGroup and the operators cannot drift apart.
-def resolution_property():
+def size_mode_property(**extra):
+    return EnumProperty(name="Size", description="How the grid size is chosen",
+                        items=SIZE_MODE_ITEMS, default="VOXEL_SIZE", **extra)
+
+
+def voxel_size_property(**extra):
+    return FloatProperty(
+        name="Voxel Size",
+        description="Voxel edge in world units (object scale included); the grid it gives is "
+        f"shown below (at most {RESOLUTION_MAX} voxels along a side)",
+        default=VOXEL_SIZE_DEFAULT, min=VOXEL_SIZE_MIN, soft_min=0.001, soft_max=1.0,
+        step=1, precision=4, subtype="DISTANCE", unit="LENGTH", **extra)
+
+
+def resolution_property(**extra):
     return IntProperty(
         name="Resolution",
-        description=f"Voxels along the longest side of each object's bounding box "
-        f"({RESOLUTION_MIN}-{RESOLUTION_MAX})",
-        default=RESOLUTION_DEFAULT,
-        soft_min=RESOLUTION_MIN,
-        soft_max=RESOLUTION_MAX,
-    )
+        description=f"Voxels along the longest side of each object ({RESOLUTION_MIN}-"
+        f"{RESOLUTION_MAX}; above 256 runs take minutes)",
+        default=RESOLUTION_DEFAULT, min=RESOLUTION_MIN, max=RESOLUTION_MAX,
+        soft_min=8, soft_max=256, **extra)
 
 
-def method_property():
-    return EnumProperty(name="Model", description="Reconstruction method", items=METHOD_ITEMS,
-                        default="agndc")
+def method_property(items=METHOD_ITEMS, **extra):
+    return EnumProperty(name="Method", description="Reconstruction method", items=items,
+                        default="agndc", **extra)
 
 
-def threads_property():
+def threads_property(**extra):
     return IntProperty(name="Threads", description="CPU threads for the network (0 = Auto)",
-                       default=0, min=0, max=256)
+                       default=0, min=0, max=256, **extra)
 
 
-def compare_mc_property():
+def compare_mc_property(**extra):
     return BoolProperty(name="Compare with MC",
-                        description="Also add the marching-cubes mesh of the same grid (<name>_MC)",
-                        default=True)
+                        description="Also add the marching-cubes mesh of the same grid (<name>_MC) "
+                        "beside the result",
+                        default=False, **extra)
 
 
-def smooth_property():
+def smooth_property(**extra):
     return BoolProperty(name="Smooth Shading", description="Shade the new objects smooth",
-                        default=False)
+                        default=False, **extra)
+
+
+def use_modifiers_property(**extra):
+    return BoolProperty(name="Apply Modifiers",
+                        description="Remesh the mesh as shown, with its modifiers (off: the base "
+                        "mesh without modifiers)",
+                        default=True, **extra)
+
+
+def output_property(**extra):
+    return EnumProperty(name="Output", description="Where the result goes", items=OUTPUT_ITEMS,
+                        default="BESIDE", **extra)
 
 
 class AGNDC_RemeshSettings(bpy.types.PropertyGroup):
+    size_mode: size_mode_property()
+    voxel_size: voxel_size_property()
     resolution: resolution_property()
     method: method_property()
-    threads: threads_property()
+    use_modifiers: use_modifiers_property()
+    output: output_property()
     compare_mc: compare_mc_property()
     smooth: smooth_property()
+    threads: threads_property()

@@ -4,18 +4,26 @@ grid files in, new objects out, with ``agndc_core`` doing all the geometry.
 Work is split in three steps so the interactive operators can run the middle one on a worker
 thread (bpy is not thread-safe):
 
-1. ``mesh_job`` / ``grid_job`` (main thread): validate everything and copy the input out of
-   Blender into numpy. Nothing in the scene changes.
+1. ``mesh_jobs`` / ``grid_jobs`` (main thread): check each input and copy it out of Blender into
+   numpy, with its grid plan and time estimate. Nothing in the scene changes.
 2. ``compute_jobs`` (any thread, numpy/torch only): voxelise, reconstruct, measure distances.
-   A failure or cancellation here still leaves the scene untouched.
-3. ``apply_jobs`` (main thread): add the new objects, in one go, to the results collection.
+   Every input succeeds or fails on its own (``Job.error``); cancelling stops them all.
+3. ``apply_jobs`` (main thread): add the results of the inputs that succeeded, replacing the
+   results of an earlier run of the same input and method, and return one ``Report`` per input.
 
-``remesh_object`` and ``import_grid`` chain the three steps synchronously.
+Conventions: a mesh is remeshed as shown (modifiers applied) unless ``use_modifiers`` is off; it
+is voxelised along its own axes with a voxel size in world units (the object's scale included);
+results keep the source's transform, parent, materials (per face, from the nearest source face)
+and sit beside it along its X axis where they overlap no other object (``plan.free_offset``), or
+replace it (``replace_source``: the source is hidden, not deleted). ``remesh_object`` and
+``import_grid`` chain the three steps for one input and raise its error.
 """
 
 from __future__ import annotations
 
 import os
+import threading
+import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,31 +32,48 @@ import numpy as np
 from mathutils import Matrix
 
 from . import mesh_io
-from ._core import errors, gridio, metrics, pipeline
-from .properties import RESOLUTION_MAX, RESOLUTION_MIN
+from ._core import errors, gridio, metrics, pipeline, plan
 
-#: collection that receives every new object
+#: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
 #: object-name suffix per method
-SUFFIXES = {"agndc": "AGNDC", "undc": "UNDC", "mc": "MC"}
+SUFFIXES = {"agndc": "AGNDC", "undc": "UNDC", "mc": "MC", "sharp": "Sharp"}
 #: surface samples per mesh for the Chamfer distance in the report (the paper's metric, fewer
 #: samples than its 100k so the report costs a fraction of the remesh)
 DISTANCE_SAMPLES = 30_000
-#: gap between side-by-side results, as a fraction of the source's width
-SIDE_GAP = 0.25
+#: what to do about a mesh that is not closed
+OPEN_MESH_HINT = "add thickness (Solidify) or close the holes"
+#: ``Settings.model_index`` for every model of a multi-model .vox file
+ALL_MODELS = -1
+#: custom properties that tie a result to its input, so a later run can replace it
+TAG_SOURCE, TAG_FILE, TAG_MODEL, TAG_METHOD = ("agndc_source", "agndc_source_file",
+                                               "agndc_model", "agndc_method")
+BUSY_MESSAGE = "Another AGNDC remesh is running: wait for it to finish or press Esc"
+
+#: held while ``compute_jobs`` runs: a second run (operator, script, batch) cannot start beside it
+_BUSY = threading.Lock()
 
 
 @dataclass
 class Settings:
     """What to do; the operators fill it from their properties, the batch script from argv."""
 
-    resolution: int = 64
+    resolution: int = 64  # voxels along the longest side, used when voxel_size is 0
     method: str = "agndc"
     threads: int = 0  # 0 = automatic
     compare_mc: bool = True
     smooth: bool = False
     checkpoint: str | None = None  # None = the shipped weights
     distance: bool = True  # Chamfer distance of each result to the source mesh
+    voxel_size: float = 0.0  # voxel edge in world units; 0 = use ``resolution``
+    use_modifiers: bool = True  # the evaluated mesh (modifiers applied); False: the base mesh
+    replace_source: bool = False  # the result takes the source's place, the source is hidden
+    model_index: int = 0  # .vox files: which model; ALL_MODELS = each model as an object
+
+    def methods(self) -> list[str]:
+        """The methods each input is reconstructed with (the result, then MC to compare)."""
+        compare = self.compare_mc and self.method != "mc" and not self.replace_source
+        return [self.method, "mc"] if compare else [self.method]
 
 
 @dataclass
@@ -60,19 +85,31 @@ class Output:
     faces: np.ndarray  # (F, 3) int64
     seconds: float
     cd: float | None = None  # Chamfer distance to the source (metrics.evaluate, raw)
+    materials: np.ndarray | None = None  # (F,) int32 material slot per face
 
 
 @dataclass
 class Job:
-    """One input (an object or a grid file) and, once computed, its outputs."""
+    """One input (an object, or one model of a grid file) and, once computed, its outputs."""
 
     name: str
-    vertices: np.ndarray | None = None  # (V, 3) float64 source mesh, local coordinates
+    source: str | None = None  # the source object's name (mesh input)
+    vertices: np.ndarray | None = None  # (V, 3) float64 source mesh, local coords x frame
     faces: np.ndarray | None = None  # (F, 3) int64
+    frame: np.ndarray = field(default_factory=lambda: np.ones(3))  # local -> voxelised frame
+    face_materials: np.ndarray | None = None  # (F,) int32 slot per triangle (several slots)
+    material_slots: list = field(default_factory=list)  # (material name or None, link)
+    resolution: int = 0  # planned grid (mesh input)
+    shape: tuple = ()
     grid_path: str | None = None
-    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))  # placement of the outputs
-    step: float = 0.0  # world-space X offset between neighbouring objects (0: from the output)
-    materials: list = field(default_factory=list)  # material names of the source
+    model_index: int = 0
+    matrix: np.ndarray = field(default_factory=lambda: np.eye(4))  # the source's matrix_world
+    parent: str | None = None
+    parent_inverse: np.ndarray = field(default_factory=lambda: np.eye(4))
+    estimate: float = 0.0  # seconds (plan.estimate_seconds; 0 for grids)
+    open_edges: int = 0
+    warnings: list = field(default_factory=list)
+    error: errors.AGNDCError | None = None
     outputs: list = field(default_factory=list)
 
 
@@ -89,12 +126,16 @@ class Made:
 
 @dataclass
 class Report:
-    """What ``remesh_object`` / ``import_grid`` added for one input."""
+    """What a run did with one input: the objects it added, or why it failed."""
 
     source: str
     made: list
+    error: str | None = None
+    warnings: list = field(default_factory=list)
 
     def summary(self) -> str:
+        if self.error is not None:
+            return f"{self.source}: {_without_name(self.error, self.source)}"
         parts = []
         for item in self.made:
             text = f"{SUFFIXES[item.method]} {item.faces:,} faces in {item.seconds:.2f} s"
@@ -104,17 +145,43 @@ class Report:
         return f"{self.source}: " + "; ".join(parts)
 
 
-# --------------------------------------------------------------------------- step 1: validate
+def summarize(reports: list[Report]) -> tuple[str, str]:
+    """(report level, one line) for a whole run, e.g. ``('WARNING', '2 remeshed, 1 failed:
+    Plane: open surface ... add thickness (Solidify) or close the holes')``."""
+    failed = [r for r in reports if r.error is not None]
+    done = len(reports) - len(failed)
+    text = f"{done} remeshed"
+    if failed:
+        text += f", {len(failed)} failed: " + "; ".join(r.summary() for r in failed)
+    warnings = [w for r in reports for w in r.warnings]
+    if warnings:
+        text += " | " + "; ".join(warnings)
+    level = "ERROR" if not done else "WARNING" if failed or warnings else "INFO"
+    return level, text
+
+
+def _without_name(message: str, name: str) -> str:
+    """A core message without its leading "name: " (the summary names the input itself)."""
+    for prefix in (f"{name}: ", f"'{name}': "):
+        if message.startswith(prefix):
+            return message[len(prefix):]
+    return message
+
+
+# --------------------------------------------------------------------------- step 1: prepare
 
 
 def check_settings(settings: Settings) -> None:
     """Raise AGNDCError for settings no run can use."""
-    if not RESOLUTION_MIN <= int(settings.resolution) <= RESOLUTION_MAX:
-        raise errors.AGNDCError(f"Resolution must be between {RESOLUTION_MIN} and "
-                                f"{RESOLUTION_MAX}, got {settings.resolution}")
     if settings.method not in SUFFIXES:
-        raise errors.AGNDCError(f"Unknown model {settings.method!r}; choose one of "
+        raise errors.AGNDCError(f"Unknown method {settings.method!r}; choose one of "
                                 f"{', '.join(SUFFIXES)}")
+    if settings.voxel_size < 0 or not np.isfinite(settings.voxel_size):
+        raise errors.AGNDCError(f"Voxel size must be positive, got {settings.voxel_size}")
+    if not settings.voxel_size and not (
+            plan.RESOLUTION_MIN <= int(settings.resolution) <= plan.RESOLUTION_MAX):
+        raise errors.AGNDCError(f"Resolution must be between {plan.RESOLUTION_MIN} and "
+                                f"{plan.RESOLUTION_MAX}, got {settings.resolution}")
     if settings.threads < 0:
         raise errors.AGNDCError(f"Threads must be 0 (automatic) or more, got {settings.threads}")
     weights = checkpoint_path(settings.method, settings.checkpoint)
@@ -122,50 +189,145 @@ def check_settings(settings: Settings) -> None:
         where = "custom checkpoint" if settings.checkpoint else "shipped weights"
         raise errors.ModelError(
             f"{SUFFIXES[settings.method]} needs its {where}, not found: {weights}. Choose "
-            "Marching Cubes, or set a checkpoint in the add-on preferences")
+            "Marching Cubes or Sharp, or set a checkpoint in the add-on preferences")
 
 
-def mesh_job(obj, settings: Settings) -> Job:
-    """Validate one object and copy its mesh out of Blender (main thread; changes nothing)."""
-    check_settings(settings)
+def frame_of(matrix: np.ndarray) -> tuple[np.ndarray, float]:
+    """(frame (3,), world units per frame unit) of a world matrix.
+
+    The mesh is voxelised in its local axes scaled by ``frame`` = the object's per-axis scale
+    over its largest, so voxels are cubes in the world; axes whose scale equals the largest
+    (within 1e-9, decomposition noise) get exactly 1, so a uniformly scaled object is voxelised
+    in its own coordinates, bit for bit as ``remesh_mesh`` would.
+    """
+    scale = np.linalg.norm(np.asarray(matrix, dtype=np.float64)[:3, :3], axis=0)
+    largest = float(scale.max())
+    if not largest > 0:
+        raise errors.MeshError("the object has zero scale")
+    frame = np.where(np.isclose(scale, largest, rtol=1e-9, atol=0), 1.0, scale / largest)
+    return frame, largest
+
+
+def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
+    """Check one object and copy its mesh out of Blender (main thread; changes nothing).
+
+    Raises:
+        AGNDCError naming the object and the problem.
+    """
     if obj is None or obj.type != "MESH":
         kind = "nothing" if obj is None else f"'{obj.name}' is a {obj.type.lower()}"
         raise errors.MeshError(f"Select a mesh object to remesh ({kind})")
-    vertices, faces = mesh_io.read_mesh(obj)
+    name = obj.name
+    vertices, faces, slots = mesh_io.read_mesh(obj, settings.use_modifiers, depsgraph)
     if len(faces) == 0:
-        raise errors.MeshError(f"'{obj.name}' has no faces: only closed surfaces can be remeshed")
+        raise errors.MeshError(f"'{name}': the mesh has no faces, nothing to remesh")
     if not np.all(np.isfinite(vertices)) or np.ptp(vertices, axis=0).max() <= 0:
-        raise errors.MeshError(f"'{obj.name}' has zero size or invalid coordinates")
-    lo, hi = mesh_io.world_bounds(obj)
-    width = float(hi[0] - lo[0]) or float((hi - lo).max())
-    return Job(name=obj.name, vertices=vertices, faces=faces,
-               matrix=np.array(obj.matrix_world, dtype=np.float64),
-               step=width * (1.0 + SIDE_GAP),
-               materials=[m.name if m is not None else None for m in obj.data.materials])
+        raise errors.MeshError(f"'{name}': the mesh has zero size or invalid coordinates")
+    matrix = np.array(obj.matrix_world, dtype=np.float64)
+    frame, world_per_unit = frame_of(matrix)
+    vertices = vertices * frame
+    extent = np.ptp(vertices, axis=0) * world_per_unit  # world units, along the object's axes
+    grid = plan.plan_grid(extent, voxel_size=settings.voxel_size or None,
+                          resolution=None if settings.voxel_size else settings.resolution,
+                          source=f"'{name}'")
+    job = Job(name=name, source=name, vertices=vertices, faces=faces, frame=frame,
+              resolution=grid.resolution, shape=grid.shape, matrix=matrix,
+              material_slots=[(s.material.name if s.material else None, s.link)
+                              for s in obj.material_slots])
+    if len(job.material_slots) > 1:
+        job.face_materials = slots
+    if obj.parent is not None:
+        job.parent = obj.parent.name
+        job.parent_inverse = np.array(obj.matrix_parent_inverse, dtype=np.float64)
+    job.open_edges = plan.open_edge_count(vertices, faces)
+    if job.open_edges and plan.is_planar(vertices[np.unique(faces)]):
+        raise _open_surface_error(name)
+    if job.open_edges:
+        job.warnings.append(f"{name} is not closed ({job.open_edges:,} open edges): remeshed as "
+                            f"the solid it encloses; {OPEN_MESH_HINT}")
+    crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
+    job.estimate = sum(plan.estimate_seconds(method, grid.shape, crossings,
+                                             distances=int(settings.distance))
+                       for method in settings.methods())
+    return job
+
+
+def _open_surface_error(name: str) -> errors.MeshError:
+    """A mesh that is not closed and encloses nothing (a plane, one triangle)."""
+    return errors.MeshError(f"'{name}': open surface with no inside to remesh: {OPEN_MESH_HINT}")
 
 
 def mesh_jobs(objects, settings: Settings) -> list[Job]:
-    """Jobs for the mesh objects among ``objects``; AGNDCError if there is none or one is bad."""
+    """One job per mesh object among ``objects``; a bad object gets a job with its ``error``.
+
+    Raises:
+        AGNDCError for unusable settings or when there is no mesh at all.
+    """
     check_settings(settings)
     meshes = [obj for obj in objects if obj is not None and obj.type == "MESH"]
     if not meshes:
         raise errors.MeshError("No mesh selected: select one or more mesh objects to remesh")
     if bpy.context.view_layer is not None:
         bpy.context.view_layer.update()  # current matrix_world after scripted transforms
-    return [mesh_job(obj, settings) for obj in meshes]
+    depsgraph = bpy.context.evaluated_depsgraph_get() if settings.use_modifiers else None
+    jobs = []
+    for obj in meshes:
+        try:
+            jobs.append(mesh_job(obj, settings, depsgraph))
+        except errors.AGNDCError as exc:
+            jobs.append(Job(name=obj.name, source=obj.name, error=exc))
+    return jobs
 
 
-def grid_job(path, settings: Settings) -> Job:
-    """Validate a grid file's name and presence (main thread); it is read in ``compute_jobs``."""
+def grid_jobs(paths, settings: Settings) -> list[Job]:
+    """Jobs for grid files (main thread): one per file, or one per model of a .vox file with
+    ``model_index=ALL_MODELS``; a file holding several models read one at a time gets a
+    warning. Grids are read in ``compute_jobs``."""
     check_settings(settings)
-    path = Path(bpy.path.abspath(str(path))) if str(path).startswith("//") else Path(path)
+    if settings.method in pipeline.MESH_ONLY_METHODS:
+        raise errors.AGNDCError(f"{SUFFIXES[settings.method]} contours a mesh's own surface: "
+                                "it needs a mesh, not a voxel grid; choose AGNDC, UNDC or MC")
+    jobs = []
+    for raw in paths:
+        path = Path(bpy.path.abspath(str(raw))) if str(raw).startswith("//") else Path(raw)
+        name = path.name[: -len(".nii.gz")] if path.name.lower().endswith(".nii.gz") \
+            else path.stem
+        try:
+            jobs.extend(_grid_file_jobs(path, name, settings))
+        except errors.AGNDCError as exc:
+            jobs.append(Job(name=name, grid_path=str(path), error=exc))
+    return jobs
+
+
+def _grid_file_jobs(path: Path, name: str, settings: Settings) -> list[Job]:
     if not gridio.is_grid_path(path):
         raise errors.GridFileError(f"{path.name}: not a grid file; expected one of "
                                    f"{', '.join(gridio.GRID_EXTENSIONS)}")
     if not path.is_file():
         raise errors.GridFileError(f"{path}: no such file")
-    stem = path.name[: -len(".nii.gz")] if path.name.lower().endswith(".nii.gz") else path.stem
-    return Job(name=stem, grid_path=str(path))
+    count = gridio.grid_model_count(path)
+    if settings.model_index == ALL_MODELS:
+        if count == 1:
+            return [Job(name=name, grid_path=str(path))]
+        return [Job(name=f"{name}_model{k}", grid_path=str(path), model_index=k)
+                for k in range(count)]
+    if not 0 <= settings.model_index < count:
+        raise errors.GridFileError(f"{path.name}: no model {settings.model_index}; the file "
+                                   f"holds {count} (0..{count - 1})")
+    job = Job(name=f"{name}_model{settings.model_index}" if count > 1 else name,
+              grid_path=str(path), model_index=settings.model_index)
+    if count > 1:
+        job.warnings.append(f"{path.name} holds {count} models; imported model "
+                            f"{settings.model_index} only (choose All Models to import each)")
+    return [job]
+
+
+def grid_job(path, settings: Settings) -> Job:
+    """The job of one grid file (one model); raises its error."""
+    (job, *_) = grid_jobs([path], settings)
+    if job.error is not None:
+        raise job.error
+    return job
 
 
 # --------------------------------------------------------------------------- step 2: compute
@@ -181,20 +343,48 @@ def resolve_threads(threads: int) -> int | None:
 
 
 def compute_jobs(jobs: list[Job], settings: Settings, progress=None, cancel=None) -> None:
-    """Fill ``job.outputs`` for every job (no bpy access: safe on a worker thread).
+    """Fill ``job.outputs`` (or ``job.error``) of every job without one (no bpy access: safe on
+    a worker thread). Only one call runs at a time.
 
     Args:
         progress: callable(fraction in [0, 1], message) or None; cancel: ``is_set()`` or None.
 
     Raises:
-        AGNDCError (CancelledError when cancelled); outputs of earlier jobs are kept but nothing
-        is added to the scene.
+        CancelledError when cancelled (nothing is added to the scene then); AGNDCError when
+        another run is in progress. Other failures are recorded per job.
     """
-    for index, job in enumerate(jobs):
-        def job_progress(fraction, message, index=index, job=job):
-            if progress is not None:
-                progress((index + fraction) / len(jobs), f"{job.name}: {message}")
-        job.outputs = _compute(job, settings, job_progress, cancel)
+    if not _BUSY.acquire(blocking=False):
+        raise errors.AGNDCError(BUSY_MESSAGE)
+    try:
+        todo = [job for job in jobs if job.error is None]
+        weights = np.array([max(job.estimate, 0.05) if job.estimate else 1.0 for job in todo])
+        starts = np.concatenate([[0.0], np.cumsum(weights)]) / max(weights.sum(), 1e-9)
+        for job, lo, hi in zip(todo, starts[:-1], starts[1:]):
+            def job_progress(fraction, message, lo=lo, hi=hi, job=job):
+                if progress is not None:
+                    progress(min(lo + (hi - lo) * fraction, 1.0), f"{job.name}: {message}")
+            try:
+                job.outputs = _compute(job, settings, job_progress, cancel)
+            except errors.CancelledError:
+                raise
+            except errors.AGNDCError as exc:
+                job.error = exc
+            except MemoryError:
+                job.error = errors.AGNDCError(
+                    f"{job.name}: out of memory; use a larger voxel size (a smaller grid)")
+            except Exception as exc:  # a bug: keep the traceback in the console, go on
+                traceback.print_exception(exc)
+                job.error = errors.AGNDCError(
+                    f"{job.name}: internal error {exc!r} (see the system console)")
+        if progress is not None:
+            progress(1.0, "done")
+    finally:
+        _BUSY.release()
+
+
+def is_busy() -> bool:
+    """True while ``compute_jobs`` runs (on any thread)."""
+    return _BUSY.locked()
 
 
 def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
@@ -202,35 +392,43 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         if cancel is not None and cancel.is_set():
             raise errors.CancelledError("Remesh cancelled")
 
+    methods = settings.methods()
     options = dict(checkpoint=settings.checkpoint or None,
                    threads=resolve_threads(settings.threads), cancel=cancel)
-    main_share = 0.75 if settings.compare_mc and settings.method != "mc" else 0.9
-
-    def sub(lo, hi):
-        return lambda f, msg: progress(lo + (hi - lo) * f, msg)
-
+    main_share = 0.75 if len(methods) > 1 else 0.9
+    sub = pipeline.subrange
     if job.grid_path is not None:
         progress(0.0, "reading grid")
-        grid = gridio.load_grid(job.grid_path)
+        grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
         check_cancel()
-        first = pipeline.remesh(grid, method=settings.method, progress=sub(0.0, main_share),
-                                **options)
+        first = pipeline.remesh(grid, method=settings.method,
+                                progress=sub(progress, 0.0, main_share), **options)
     else:
-        first = pipeline.remesh_mesh(job.vertices, job.faces, resolution=int(settings.resolution),
-                                     method=settings.method, source=job.name,
-                                     progress=sub(0.0, main_share), **options)
+        try:
+            first = pipeline.remesh_mesh(job.vertices, job.faces, resolution=job.resolution,
+                                         method=settings.method, source=f"'{job.name}'",
+                                         progress=sub(progress, 0.0, main_share), **options)
+        except errors.GridError as exc:
+            if not job.open_edges:
+                raise
+            raise _open_surface_error(job.name) from exc
     results = [first]
-    if settings.compare_mc and settings.method != "mc":
+    if len(methods) > 1:
         check_cancel()
         results.append(pipeline.remesh(first.grid, method="mc", cancel=cancel,
-                                       progress=sub(main_share, 0.9)))
+                                       progress=sub(progress, main_share, 0.9)))
     outputs = [Output(r.method, r.vertices, r.faces, r.seconds) for r in results]
-    if settings.distance and job.vertices is not None:
-        for output in outputs:
-            check_cancel()
+    for output in outputs:
+        check_cancel()
+        if settings.distance and job.vertices is not None:
             progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
             output.cd = float(metrics.evaluate(output.vertices, output.faces, job.vertices,
                                                job.faces, n_samples=DISTANCE_SAMPLES)["cd"])
+        if job.face_materials is not None and len(output.faces):
+            centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)
+            output.materials = plan.nearest_face_values(job.vertices, job.faces,
+                                                        job.face_materials, centroids)
+        output.vertices = output.vertices / job.frame  # back to the object's local coordinates
     progress(1.0, "done")
     return outputs
 
@@ -249,47 +447,127 @@ def results_collection(scene) -> bpy.types.Collection:
 
 
 def apply_jobs(jobs: list[Job], settings: Settings, scene=None) -> list[Report]:
-    """Add one object per output of every computed job (main thread) and select them."""
+    """Add the outputs of every computed job (main thread), select them, and report per job.
+
+    Results of an earlier run of the same input and method are replaced (removed first, so the
+    new ones take their place). Beside-source results are placed where they overlap no object.
+    """
     scene = scene or bpy.context.scene
-    collection = results_collection(scene)
-    reports = [Report(job.name, [_add_output(job, k, out, settings, collection)
-                                 for k, out in enumerate(job.outputs)]) for job in jobs]
-    made = [item.object for report in reports for item in report.made]
-    if made and bpy.context.view_layer is not None:
+    done = [job for job in jobs if job.error is None and job.outputs]
+    removed = set()
+    for job in done:
+        removed |= _remove_previous(job, [out.method for out in job.outputs])
+    occupied = list(zip(*mesh_io.solid_bounds(scene, exclude=removed)))  # [(lo, hi)]
+    reports = []
+    for job in jobs:
+        if job.error is not None or not job.outputs:
+            error = job.error or errors.AGNDCError("not computed")
+            reports.append(Report(job.name, [], str(error), job.warnings))
+            continue
+        made = [_add_output(job, k, out, settings, scene, occupied)
+                for k, out in enumerate(job.outputs)]
+        reports.append(Report(job.name, made, None, job.warnings))
+    objects = [item.object for report in reports for item in report.made]
+    if objects and bpy.context.view_layer is not None:
         for obj in bpy.context.selected_objects:
             obj.select_set(False)
-        for obj in made:
-            obj.select_set(True)
-        bpy.context.view_layer.objects.active = made[0]
+        for obj in objects:
+            if obj.name in bpy.context.view_layer.objects:
+                obj.select_set(True)
+        if objects[0].name in bpy.context.view_layer.objects:
+            bpy.context.view_layer.objects.active = objects[0]
     return reports
 
 
-def _add_output(job: Job, k: int, out: Output, settings: Settings, collection) -> Made:
+def _remove_previous(job: Job, methods: list[str]) -> set[str]:
+    """Remove the results an earlier run made from this job's input with these methods."""
+    source = bpy.data.objects.get(job.source) if job.source else None
+    old = [obj for obj in bpy.data.objects
+           if obj.get(TAG_METHOD) in methods and (
+               (source is not None and obj.get(TAG_SOURCE) == source) or
+               (job.grid_path is not None and obj.get(TAG_FILE) == job.grid_path and
+                obj.get(TAG_MODEL) == job.model_index))]
+    names = set()
+    for obj in old:
+        names.add(obj.name)
+        mesh = obj.data
+        bpy.data.objects.remove(obj)
+        if mesh is not None and mesh.users == 0:
+            bpy.data.meshes.remove(mesh)
+    return names
+
+
+def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupied) -> Made:
     name = f"{job.name}_{SUFFIXES[out.method]}"
-    mesh = mesh_io.new_mesh(name, out.vertices, out.faces)
+    mesh = mesh_io.new_mesh(name, out.vertices, out.faces, out.materials)
     mesh_io.set_smooth(mesh, settings.smooth)
-    for material_name in job.materials:
-        mesh.materials.append(bpy.data.materials.get(material_name) if material_name else None)
+    for material_name, link in job.material_slots:
+        material = bpy.data.materials.get(material_name) if material_name else None
+        mesh.materials.append(material if link == "DATA" else None)
     obj = bpy.data.objects.new(name, mesh)
-    step = job.step
-    if step <= 0 and len(out.vertices):  # grid: side by side at the first output's width
-        first = job.outputs[0].vertices
-        step = float(np.ptp(first[:, 0])) * (1.0 + SIDE_GAP) if len(first) else 0.0
-    # the source's placement, shifted along world X: first result one step to the source's
-    # right (mesh) or in place (grid), the next one a step further
-    offset = (k + (1 if job.vertices is not None else 0)) * step
-    matrix = job.matrix.copy()
-    matrix[0, 3] += offset
+    for slot, (material_name, link) in zip(obj.material_slots, job.material_slots):
+        if link == "OBJECT":
+            slot.link = "OBJECT"
+            slot.material = bpy.data.materials.get(material_name) if material_name else None
+    source = bpy.data.objects.get(job.source) if job.source else None
+    parent = bpy.data.objects.get(job.parent) if job.parent else None
+    if parent is not None:
+        obj.parent = parent
+        obj.matrix_parent_inverse = Matrix(job.parent_inverse.tolist())
+    replace = settings.replace_source and k == 0 and job.source is not None
+    matrix = _placement(job, k, out, occupied, in_place=replace)
     obj.matrix_world = Matrix(matrix.tolist())
-    collection.objects.link(obj)
+    collections = list(source.users_collection) if replace and source is not None else []
+    for collection in collections or [results_collection(scene)]:
+        collection.objects.link(obj)
+    if source is not None:
+        obj[TAG_SOURCE] = source
+    if job.grid_path is not None:
+        obj[TAG_FILE] = job.grid_path
+        obj[TAG_MODEL] = job.model_index
+    obj[TAG_METHOD] = out.method
+    if replace and source is not None:
+        source.hide_render = True
+        if source.name in bpy.context.view_layer.objects:
+            source.hide_set(True)
     return Made(obj, out.method, len(mesh.polygons), out.seconds, out.cd)
+
+
+def _placement(job: Job, k: int, out: Output, occupied: list, in_place: bool) -> np.ndarray:
+    """World matrix of output ``k``: the source's transform, moved along the source's X axis
+    (grids: world X) by whole steps to the first place where its box overlaps no object's box
+    in ``occupied`` (to which it is added). A replacing result stays at the source's place, the
+    main result of a grid at the grid's world position (except .vox, which has none)."""
+    lo, hi = mesh_io.box_bounds(_box_corners(out.vertices), job.matrix)
+    grid = job.grid_path is not None
+    if in_place or (k == 0 and grid and not job.grid_path.lower().endswith(".vox")):
+        shift = np.zeros(3)
+    else:
+        boxes_lo = np.array([box[0] for box in occupied]).reshape(-1, 3)
+        boxes_hi = np.array([box[1] for box in occupied]).reshape(-1, 3)
+        direction = (1.0, 0.0, 0.0) if grid else job.matrix[:3, 0]
+        shift = plan.free_offset(lo, hi, direction, boxes_lo, boxes_hi,
+                                 start=0 if (k == 0 and grid) else 1)
+    occupied.append((lo + shift, hi + shift))
+    matrix = job.matrix.copy()
+    matrix[:3, 3] += shift
+    return matrix
+
+
+def _box_corners(vertices: np.ndarray) -> np.ndarray:
+    """(8, 3) corners of the axis-aligned box of (V, 3) vertices."""
+    if len(vertices) == 0:
+        return np.zeros((8, 3))
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    pick = np.array([[(c >> d) & 1 for d in range(3)] for c in range(8)], dtype=bool)
+    return np.where(pick, hi, lo)
 
 
 # --------------------------------------------------------------------------- one-call API
 
 
 def remesh_object(obj, settings: Settings | None = None, progress=None, cancel=None) -> Report:
-    """Remesh one mesh object; the source is never modified.
+    """Remesh one mesh object; the source is never modified (``replace_source`` hides it).
 
     Returns:
         Report with the new objects (``<name>_AGNDC``, ``<name>_MC``...) and their statistics.
@@ -299,21 +577,30 @@ def remesh_object(obj, settings: Settings | None = None, progress=None, cancel=N
     """
     settings = settings or Settings()
     jobs = mesh_jobs([obj], settings)
-    compute_jobs(jobs, settings, progress, cancel)
-    return apply_jobs(jobs, settings)[0]
+    return _run_one(jobs, settings, progress, cancel)
 
 
 def import_grid(path, settings: Settings | None = None, progress=None, cancel=None) -> Report:
     """Reconstruct a grid file (.npy .npz .binvox .vox .nii .nii.gz) into new objects placed in
-    the grid's world coordinates (NIfTI keeps its world units)."""
+    the grid's world coordinates (NIfTI keeps its world units; .vox models side by side)."""
     settings = settings or Settings()
-    jobs = [grid_job(path, settings)]
+    jobs = grid_jobs([path], settings)
+    if len(jobs) > 1:
+        raise errors.AGNDCError("import_grid reads one model; use grid_jobs for several")
+    return _run_one(jobs, settings, progress, cancel)
+
+
+def _run_one(jobs, settings, progress, cancel) -> Report:
+    if jobs[0].error is not None:
+        raise jobs[0].error
     compute_jobs(jobs, settings, progress, cancel)
+    if jobs[0].error is not None:
+        raise jobs[0].error
     return apply_jobs(jobs, settings)[0]
 
 
 def checkpoint_path(method: str, checkpoint: str | None = None) -> Path | None:
-    """Weights file a learned method will load (None for marching cubes).
+    """Weights file a learned method will load (None for marching cubes and sharp).
 
     Mirrors ``agndc_core.checkpoint.default_checkpoint_path`` without importing torch, so the
     sidebar can show the status cheaply.

@@ -14,6 +14,9 @@ Grids (``load_grid`` / ``save_grid``):
 
 Meshes (``load_mesh`` / ``save_mesh``) go through trimesh.
 
+Every file is written to a temporary name beside its target (``temp_path``) and renamed into
+place, so a crash, Ctrl-C or kill never leaves a partial grid or mesh under the target's name.
+
 Every missing, corrupt, truncated or unsupported file raises ``GridFileError`` with a message
 that names the file; grid *content* problems (non-binary values, wrong shape, too large) are
 ``GridError`` from ``grid.py``, and unusable meshes are ``MeshError``. No other exception type
@@ -27,6 +30,7 @@ from __future__ import annotations
 import gzip
 import io
 import math
+import os
 import zipfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -35,7 +39,7 @@ import numpy as np
 
 from .errors import AGNDCError, GridFileError
 from .formats.binvox import guard_size, read_binvox, write_binvox
-from .formats.vox import read_vox, write_vox
+from .formats.vox import count_vox_models, read_vox, write_vox
 from .grid import MAX_VOXELS, VoxelGrid
 from .voxelize import check_mesh
 
@@ -48,6 +52,8 @@ MESH_SAVE_EXTENSIONS = (".obj", ".ply", ".stl", ".glb")
 NPZ_ARRAY_NAMES = ("occupancy", "grid", "voxels", "data")
 NPY_MAGIC = b"\x93NUMPY"
 ZIP_MAGIC = b"PK\x03\x04"
+#: marks a file being written (``temp_path``): ``name.tmp-<pid>.<ext>``, renamed when complete
+TEMP_MARK = ".tmp-"
 #: bytes read at a time when measuring a compressed NIfTI's payload
 _CHUNK = 1 << 20
 
@@ -98,6 +104,19 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
     if ext == ".vox":
         return VoxelGrid(read_vox(_read_bytes(path), name, model_index), source=name)
     return _read_nifti(path)
+
+
+def grid_model_count(path) -> int:
+    """How many grids a file holds: the models of a MagicaVoxel ``.vox``, 1 for other formats.
+
+    Raises GridFileError like ``load_grid`` for a missing, unreadable or corrupt ``.vox``.
+    """
+    path = Path(path)
+    ext = _require_extension(path, GRID_EXTENSIONS, "grid")
+    _require_file(path)
+    if ext != ".vox":
+        return 1
+    return count_vox_models(_read_bytes(path), path.name)
 
 
 def save_grid(grid: VoxelGrid, path) -> None:
@@ -393,11 +412,30 @@ def _read_bytes(path: Path) -> bytes:
         raise GridFileError(f"{path.name}: cannot read the file ({_describe(exc)})") from None
 
 
+def temp_path(path) -> Path:
+    """Where ``path`` is written before it is renamed into place: ``name.tmp-<pid>.<ext>``.
+
+    Same folder (so the rename is atomic), same extension, marked with ``TEMP_MARK`` and the
+    writing process's id; ``batch.remove_temp_files`` sweeps those a killed run left behind.
+    """
+    path = Path(path)
+    ext = _extension(path, GRID_EXTENSIONS + MESH_EXTENSIONS) or path.suffix
+    stem = path.name[:len(path.name) - len(ext)]
+    return path.with_name(f"{stem}{TEMP_MARK}{os.getpid()}{ext}")
+
+
 def _write_bytes(path: Path, data: bytes) -> None:
+    """Write ``data`` to a temporary name, then rename it onto ``path`` (``os.replace`` is atomic):
+    a crash, Ctrl-C or kill leaves either the old file or the complete new one, never a part."""
+    temp = temp_path(path)
     try:
-        path.write_bytes(data)
+        temp.write_bytes(data)
+        os.replace(temp, path)
     except OSError as exc:
         raise GridFileError(f"{path.name}: cannot write the file ({_describe(exc)})") from None
+    finally:
+        if temp.exists():  # the write or the rename failed, or was interrupted
+            temp.unlink(missing_ok=True)
 
 
 @contextmanager

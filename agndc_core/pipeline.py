@@ -13,8 +13,9 @@ Methods:
     "oracle" dual contouring of ground-truth labels: needs the source mesh (``remesh_mesh``);
              the ceiling any network can reach with this contouring.
     "sharp"  the same computation offered to users as a remesher for mesh input ("exact dual
-             contouring"): each dual vertex is the centroid of the source mesh's own surface
-             inside its cell, so flat faces stay flat and creases stay where the source has them.
+             contouring"): each dual vertex minimises the quadratic error of the source mesh's
+             own tangent planes inside its cell (a QEF, ``labels.py``), so flat faces stay flat
+             and creases and corners stay where the source has them.
 
 Topology: with binary input the crossed edges of the finest lattice are exactly the edges whose
 end points differ, so the networks supply the vertex positions and the input supplies the edges
@@ -92,6 +93,13 @@ class _Stages:
         return time.perf_counter() - self._start
 
 
+def subrange(progress, lo: float, hi: float):
+    """A progress callback that maps [0, 1] onto [lo, hi] of ``progress`` (None stays None)."""
+    if progress is None:
+        return None
+    return lambda fraction, message: progress(lo + (hi - lo) * fraction, message)
+
+
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
            min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None) -> RemeshResult:
@@ -128,7 +136,8 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             vertex = stages.run("surface nets", 0.05, surface_nets_lattice, lattice)
         else:
             vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
-                                checkpoint, threads, device, tile, progress, cancel)
+                                checkpoint, threads, device, tile,
+                                subrange(progress, 0.05, 0.9), cancel)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
@@ -181,16 +190,22 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
     """
     from .voxelize import voxelize
 
-    start = time.perf_counter()
-    grid = voxelize(vertices, faces, resolution, source=source)
-    voxel_seconds = time.perf_counter() - start
+    progress = options.get("progress")
+    stages = _Stages(progress, options.get("cancel"))
+    grid = stages.run("voxelise", 0.0, voxelize, vertices, faces, resolution, source=source)
+    # progress shares, measured at 64³-128³ (1 thread): the exact intersections take ~85 % of
+    # "sharp", the network ~99 % of "agndc"; MC is over in a tenth of a second either way
+    share = 0.05
     if method in MESH_ONLY_METHODS:
         from .labels import make_labels
 
-        options["labels"] = make_labels(vertices, faces, grid, levels=0)
+        options["labels"] = stages.run("exact intersections", 0.05, make_labels, vertices, faces,
+                                       grid, levels=0)
+        share = 0.8
+    options["progress"] = subrange(progress, share, 1.0)
     result = remesh(grid, method=method, **options)
-    result.timings = {"voxelise": voxel_seconds, **result.timings}
-    result.seconds += voxel_seconds
+    result.timings = {**stages.timings, **result.timings}
+    result.seconds += stages.seconds
     return result
 
 

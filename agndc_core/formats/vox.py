@@ -34,6 +34,23 @@ def read_vox(data: bytes, name: str, model_index: int = 0) -> np.ndarray:
     GridFileError
         Not a .vox file, truncated or inconsistent chunks, or no such model.
     """
+    models = _model_table(data, name)
+    if not 0 <= model_index < len(models):
+        raise GridFileError(
+            f"{name}: model_index {model_index} is out of range: the file holds "
+            f"{len(models)} model{'s' if len(models) != 1 else ''} (0..{len(models) - 1})"
+        )
+    size, offset, length = models[model_index]
+    return _voxels(data, size, offset, length, name)
+
+
+def count_vox_models(data: bytes, name: str) -> int:
+    """Number of models in a .vox file (GridFileError as ``read_vox`` for a bad file)."""
+    return len(_model_table(data, name))
+
+
+def _model_table(data: bytes, name: str) -> list[tuple[tuple, int, int]]:
+    """The checked header and the (non-empty) model list of a .vox file, see ``_models``."""
     if len(data) < 8 or data[:4] != MAGIC:
         raise GridFileError(f"{name}: not a MagicaVoxel file (it does not start with 'VOX ')")
     chunk_id, content, children, start = _chunk_at(data, 8, len(data), name)
@@ -42,13 +59,7 @@ def read_vox(data: bytes, name: str, model_index: int = 0) -> np.ndarray:
     models = _models(data, start + content, start + content + children, name)
     if not models:
         raise GridFileError(f"{name}: .vox file holds no voxel model (no XYZI chunk)")
-    if not 0 <= model_index < len(models):
-        raise GridFileError(
-            f"{name}: model_index {model_index} is out of range: the file holds "
-            f"{len(models)} model{'s' if len(models) != 1 else ''} (0..{len(models) - 1})"
-        )
-    size, offset, length = models[model_index]
-    return _voxels(data, size, offset, length, name)
+    return models
 
 
 def write_vox(occupancy: np.ndarray, name: str) -> bytes:

@@ -90,3 +90,53 @@ def scene_state() -> dict:
         "materials": sorted(m.name for m in bpy.data.materials),
         "scene_children": sorted(c.name for c in bpy.context.scene.collection.children),
     }
+
+
+def mesh_world_bounds(obj) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) min and max of an object's mesh vertices in world coordinates."""
+    coords = np.zeros(len(obj.data.vertices) * 3, dtype=np.float32)
+    obj.data.vertices.foreach_get("co", coords)
+    matrix = np.array(obj.matrix_world)
+    world = coords.reshape(-1, 3) @ matrix[:3, :3].T + matrix[:3, 3]
+    return world.min(axis=0), world.max(axis=0)
+
+
+def boxes_overlap(a, b) -> bool:
+    """Do two (lo, hi) boxes overlap (more than touching)?"""
+    return bool(np.all(a[0] < b[1] - 1e-6) and np.all(b[0] < a[1] - 1e-6))
+
+
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    triangles = vertices[faces]
+    return float(np.einsum("ij,ij->i", triangles[:, 0],
+                           np.cross(triangles[:, 1], triangles[:, 2])).sum() / 6.0)
+
+
+def select_only(*objects) -> None:
+    for obj in bpy.context.selected_objects:
+        obj.select_set(False)
+    for obj in objects:
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = objects[0] if objects else None
+
+
+def vox_bytes(models) -> bytes:
+    """A MagicaVoxel file built by hand: ``models`` is a list of (size (3,), xyz (N, 3))."""
+    import struct
+
+    def chunk(chunk_id, content, children=b""):
+        return struct.pack("<4sii", chunk_id, len(content), len(children)) + content + children
+
+    children = chunk(b"PACK", struct.pack("<i", len(models)))
+    for size, xyz in models:
+        xyz = np.asarray(xyz, dtype=np.int64).reshape(-1, 3)
+        xyzi = np.concatenate([xyz, np.full((len(xyz), 1), 7)], axis=1)
+        children += chunk(b"SIZE", struct.pack("<3i", *size))
+        children += chunk(b"XYZI", struct.pack("<i", len(xyz)) + xyzi.astype(np.uint8).tobytes())
+    return b"VOX " + struct.pack("<i", 150) + chunk(b"MAIN", b"", children)
+
+
+def block_voxels(lo, hi) -> np.ndarray:
+    """(N, 3) integer coordinates of the voxels of the block lo <= xyz < hi."""
+    axes = [np.arange(a, b) for a, b in zip(lo, hi)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)

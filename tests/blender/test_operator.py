@@ -7,7 +7,15 @@ import bpy
 import numpy as np
 import pytest
 from conftest import WEIGHTS
-from helpers import add_object, assert_same_object_state, cad_part, object_state, scene_state
+from helpers import (
+    add_object,
+    assert_same_object_state,
+    boxes_overlap,
+    cad_part,
+    mesh_world_bounds,
+    object_state,
+    scene_state,
+)
 
 from agndc_core.gridio import load_grid
 from agndc_core.metrics import evaluate
@@ -33,6 +41,17 @@ def _assert_api_mesh(obj, source_obj, vertices, faces, *, method, resolution=RES
     np.testing.assert_allclose(got_v, expected.vertices, rtol=0, atol=1e-5)
     rotation_and_scale = np.array(obj.matrix_world)[:3, :3]
     np.testing.assert_allclose(rotation_and_scale, np.array(source_obj.matrix_world)[:3, :3])
+
+
+def _assert_beside(result, source):
+    """Offset from the source along the source's own (rotated) X axis, boxes apart."""
+    offset = np.array(result.matrix_world)[:3, 3] - np.array(source.matrix_world)[:3, 3]
+    x_axis = np.array(source.matrix_world)[:3, 0]
+    x_axis /= np.linalg.norm(x_axis)
+    assert offset @ x_axis > 0
+    np.testing.assert_allclose(offset, (offset @ x_axis) * x_axis, atol=1e-5)
+    bpy.context.view_layer.update()
+    assert not boxes_overlap(mesh_world_bounds(result), mesh_world_bounds(source))
 
 
 def _mesh(obj):
@@ -63,8 +82,7 @@ def test_remesh_cad_part(addon):
     assert result.name in bpy.data.collections["AGNDC Results"].objects
     assert 2_000 < len(result.data.polygons) < 200_000
     assert result.data.materials[0] == source.data.materials[0]  # shared, not copied
-    offset = np.array(result.matrix_world)[:3, 3] - np.array(source.matrix_world)[:3, 3]
-    assert offset[0] > 0 and np.allclose(offset[1:], 0)  # beside the source, along world X
+    _assert_beside(result, source)
     _assert_api_mesh(result, source, vertices, faces, method="mc")
     cd = evaluate(*_mesh(result), vertices, faces)["cd"]
     assert cd < 5e-4  # the same grid, 1/64 of the part: close to the source
@@ -73,6 +91,7 @@ def test_remesh_cad_part(addon):
 def test_scene_settings_used_when_not_given(addon):
     vertices, faces = cad_part()
     add_object(addon.mesh_io, "Part", vertices, faces)
+    bpy.context.scene.agndc.size_mode = "RESOLUTION"
     bpy.context.scene.agndc.resolution = 24
     bpy.context.scene.agndc.method = "mc"
     bpy.context.scene.agndc.smooth = True
@@ -81,6 +100,23 @@ def test_scene_settings_used_when_not_given(addon):
     assert result.data.polygons[0].use_smooth
     _assert_api_mesh(result, bpy.data.objects["Part"], vertices, faces, method="mc",
                      resolution=24)
+
+
+def test_a_later_call_follows_the_sidebar_not_the_last_call(addon):
+    """The operator's settings are never remembered from its last call (SKIP_SAVE): the
+    button always runs what the sidebar shows."""
+    bpy.ops.mesh.primitive_cube_add()
+    assert _run(method="mc", resolution=16) == {"FINISHED"}
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.data.objects["Cube"].select_set(True)
+    bpy.context.scene.agndc.method = "sharp"
+    bpy.context.scene.agndc.voxel_size = 0.5
+    assert _run() == {"FINISHED"}
+    result = bpy.data.objects["Cube_Sharp"]
+    assert len(result.data.polygons) == 6 * 4 * 4 * 2  # 2 units at 0.5: 4 x 4 quads a side
+    rna = bpy.ops.object.agndc_remesh.get_rna_type().properties
+    assert all(rna[name].is_skip_save for name in ("method", "voxel_size", "resolution",
+                                                   "size_mode", "output", "use_modifiers"))
 
 
 def test_several_selected_objects(addon):
@@ -145,7 +181,8 @@ def test_agndc_operator_equals_api(addon, tiny_checkpoint, custom_checkpoint):
     assert _run(resolution=16, method="agndc", compare_mc=True, threads=1) == {"FINISHED"}
     assert_same_object_state(before, object_state(source))
     agndc, mc = bpy.data.objects["Part_AGNDC"], bpy.data.objects["Part_MC"]
-    assert np.array(mc.matrix_world)[0, 3] > np.array(agndc.matrix_world)[0, 3]  # side by side
+    _assert_beside(agndc, source)
+    _assert_beside(mc, agndc)  # the next free place along the source's X axis
     expected = remesh_mesh(vertices, faces, resolution=16, method="agndc",
                            checkpoint=tiny_checkpoint, threads=1)
     got_v, got_f = _mesh(agndc)
@@ -194,28 +231,52 @@ def test_bad_custom_checkpoint_reports_and_leaves_scene(addon, tmp_path, problem
         prefs.checkpoint = ""
 
 
-@pytest.mark.parametrize("case", ["nothing selected", "empty selected", "no faces",
-                                  "resolution too low", "resolution too high"])
+@pytest.mark.parametrize("case", ["nothing selected", "empty selected", "camera selected",
+                                  "no faces", "voxel size too fine", "grid too large"])
 def test_user_errors_leave_scene_untouched(addon, case):
     vertices, faces = cad_part()
     options = dict(resolution=RES, method="mc")
     if case == "nothing selected":
         add_object(addon.mesh_io, "Part", vertices, faces, select=False)
-        message = "No mesh selected"
-    elif case == "empty selected":
-        bpy.ops.object.empty_add()
-        message = "No mesh selected"
+        message = "Select one or more mesh objects"
+    elif case in ("empty selected", "camera selected"):
+        add_object(addon.mesh_io, "Part", vertices, faces, select=False)
+        bpy.ops.object.empty_add() if case == "empty selected" else bpy.ops.object.camera_add()
+        message = "Select one or more mesh objects"
+        assert not bpy.ops.object.agndc_remesh.poll()  # the button is disabled
     elif case == "no faces":
         add_object(addon.mesh_io, "Points", vertices, np.zeros((0, 3), dtype=np.int64))
-        message = "has no faces"
+        message = "Points: the mesh has no faces"
+    elif case == "voxel size too fine":
+        add_object(addon.mesh_io, "Part", vertices, faces)  # longest side 2 in the world
+        options = dict(voxel_size=1e-4, method="mc")
+        message = r"Part: a voxel size of 0\.0001 gives 20,002 voxels .*at least 0\.00196"
     else:
-        add_object(addon.mesh_io, "Part", vertices, faces)
-        options["resolution"] = 4 if case == "resolution too low" else 1000
-        message = "Resolution must be between 8 and 256"
+        bpy.ops.mesh.primitive_cube_add(size=2.0)  # 702 voxels a side: within 1024, but 702³
+        options = dict(voxel_size=2 / 700, method="mc")
+        message = ("Cube: a 702×702×702 grid has 345,948,408 voxels, more than the "
+                   "216,000,000 the remesher handles; use a voxel size of at least")
     before = scene_state()
     with pytest.raises(RuntimeError, match=message):
         _run(**options)
     assert scene_state() == before
+
+
+def test_property_limits_match_the_core(addon):
+    """Hard limits: a value the core refuses cannot be typed (Blender clamps it)."""
+    from agndc_core import plan
+
+    for data in (bpy.context.scene.agndc,
+                 bpy.ops.object.agndc_remesh.get_rna_type()):
+        resolution = data.bl_rna.properties["resolution"]
+        assert (resolution.hard_min, resolution.hard_max) == (plan.RESOLUTION_MIN,
+                                                               plan.RESOLUTION_MAX)
+        assert data.bl_rna.properties["voxel_size"].hard_min > 0
+    settings = bpy.context.scene.agndc
+    settings.resolution = 5000
+    assert settings.resolution == plan.RESOLUTION_MAX == 1024  # as the CLI accepts
+    settings.resolution = 1
+    assert settings.resolution == plan.RESOLUTION_MIN
 
 
 def _grid_file(tmp_path, kind: str, resolution: int = 40):

@@ -1,20 +1,26 @@
 """The interactive parts that background mode cannot drive: the modal worker (with a stand-in
-window manager and events) and the draw functions (with a recording layout)."""
+window manager and events: progress bar, Esc, one run at a time), the draw functions (with a
+recording layout), the time estimate and its confirmation, and drag and drop."""
 
 import importlib
+import re
 import time
 from types import SimpleNamespace
 
 import bpy
 import pytest
+from conftest import WEIGHTS
 from helpers import add_object, cad_part, scene_state
 
 pytestmark = pytest.mark.blender
 
+TIMER = SimpleNamespace(type="TIMER", value="NOTHING")
+ESC = SimpleNamespace(type="ESC", value="PRESS")
+
 
 class FakeWindowManager:
     def __init__(self):
-        self.progress, self.handlers, self.timers = [], [], []
+        self.handlers, self.timers = [], []
 
     def event_timer_add(self, step, window=None):
         self.timers.append(object())
@@ -26,15 +32,6 @@ class FakeWindowManager:
     def modal_handler_add(self, op):
         self.handlers.append(op)
 
-    def progress_begin(self, lo, hi):
-        self.progress.append("begin")
-
-    def progress_update(self, value):
-        self.progress.append(value)
-
-    def progress_end(self):
-        self.progress.append("end")
-
 
 class FakeWorkspace:
     def __init__(self):
@@ -44,69 +41,13 @@ class FakeWorkspace:
         self.status.append(text)
 
 
-def _modal_op(addon):
-    operators = importlib.import_module(f"{addon.module}.operators")
-
-    class Op(operators._RemeshOperatorMixin):
-        def __init__(self):
-            self.reports = []
-
-        def report(self, kind, message):
-            self.reports.append((set(kind), message))
-
-    return Op()
-
-
-def _context():
-    return SimpleNamespace(window_manager=FakeWindowManager(), workspace=FakeWorkspace(),
-                           window=object(), scene=bpy.context.scene)
-
-
-def _start(addon, resolution):
-    vertices, faces = cad_part()
-    obj = add_object(addon.mesh_io, "Part", vertices, faces)
-    settings = addon.remesh.Settings(resolution=resolution, method="mc")
-    jobs = addon.remesh.mesh_jobs([obj], settings)
-    op, context = _modal_op(addon), _context()
-    before = scene_state()
-    assert op.start_worker(context, addon.remesh, jobs, settings) == {"RUNNING_MODAL"}
-    return op, context, before
-
-
-def test_modal_worker_finishes_on_the_main_thread(addon):
-    op, context, _ = _start(addon, 32)
-    timer = SimpleNamespace(type="TIMER", value="NOTHING")
-    for _ in range(600):
-        result = op.modal(context, timer)
-        if result != {"PASS_THROUGH"}:
-            break
-        time.sleep(0.05)
-    assert result == {"FINISHED"}, op.reports
-    assert "Part_MC" in bpy.data.objects
-    assert any("Part: MC" in message for _, message in op.reports)
-    wm = context.window_manager
-    assert wm.progress[0] == "begin" and wm.progress[-1] == "end" and not wm.timers
-    assert context.workspace.status[-1] is None  # status text cleared
-    assert not type(op)._running
-
-
-def test_modal_escape_cancels_and_leaves_scene(addon):
-    op, context, before = _start(addon, 200)
-    assert op.modal(context, SimpleNamespace(type="ESC", value="PRESS")) == {"CANCELLED"}
-    assert op._cancel.is_set()
-    op._thread.join(60)  # the worker notices at its next check
-    assert not op._thread.is_alive()
-    assert scene_state() == before
-    assert context.window_manager.progress[-1] == "end" and not context.window_manager.timers
-    assert not type(op)._running
-
-
 class RecordingLayout:
     """Enough of UILayout for the draw functions; checks every prop name exists."""
 
     def __init__(self, log):
         self.log = log
         self.use_property_split = self.use_property_decorate = False
+        self.active = True
 
     def column(self, **_):
         return self
@@ -124,9 +65,109 @@ class RecordingLayout:
         module, name = idname.split(".")
         assert getattr(getattr(bpy.ops, module), name).get_rna_type() is not None
         self.log.append(("operator", idname))
+        return SimpleNamespace()
 
     def label(self, text="", **_):
         self.log.append(("label", text))
+
+    def progress(self, factor=0.0, type="BAR", text=""):
+        assert 0.0 <= factor <= 1.0 and type == "BAR"
+        self.log.append(("progress", factor))
+
+
+def _operators(addon):
+    return importlib.import_module(f"{addon.module}.operators")
+
+
+def _modal_op(addon):
+    class Op(_operators(addon)._RemeshOperatorMixin):
+        def __init__(self):
+            self.reports = []
+
+        def report(self, kind, message):
+            self.reports.append((set(kind), message))
+
+    return Op()
+
+
+def _context():
+    return SimpleNamespace(window_manager=FakeWindowManager(), workspace=FakeWorkspace(),
+                           window=object(), scene=bpy.context.scene, screen=None)
+
+
+def _start(addon, resolution, method="mc", threads=1):
+    vertices, faces = cad_part()
+    obj = add_object(addon.mesh_io, "Part", vertices, faces)
+    settings = addon.remesh.Settings(resolution=resolution, method=method, threads=threads,
+                                     compare_mc=False)
+    jobs = addon.remesh.mesh_jobs([obj], settings)
+    op, context = _modal_op(addon), _context()
+    before = scene_state()
+    assert op.start_worker(context, addon.remesh, jobs, settings) == {"RUNNING_MODAL"}
+    return op, context, before
+
+
+def _status_bar(context):
+    """What the status bar draws now: ``status_text_set`` got a draw function (or None)."""
+    draw = context.workspace.status[-1]
+    if draw is None:
+        return None
+    log = []
+    draw(SimpleNamespace(layout=RecordingLayout(log)), bpy.context)
+    return log
+
+
+def test_modal_worker_progress_bar_and_finish(addon):
+    run = _operators(addon).RUN
+    op, context, _ = _start(addon, 48, method="sharp")
+    fractions = []
+    for _ in range(1200):
+        result = op.modal(context, TIMER)
+        if result != {"PASS_THROUGH"}:
+            break
+        bar = [value for kind, value in _status_bar(context) if kind == "progress"]
+        assert len(bar) == 1  # a real progress bar in the status bar
+        fractions.append(bar[0])
+        time.sleep(0.05)
+    assert result == {"FINISHED"}, op.reports
+    assert "Part_Sharp" in bpy.data.objects
+    assert fractions == sorted(fractions) and len(set(fractions)) >= 2
+    assert any("Part: Sharp" in message for _, message in op.reports)
+    assert context.workspace.status[-1] is None  # the status bar is back to normal
+    assert not context.window_manager.timers and not run.active
+
+
+@pytest.mark.skipif(not WEIGHTS.is_file(), reason="needs the shipped AGNDC weights")
+def test_escape_stops_the_network_and_blocks_a_second_run(addon):
+    """Esc while the network runs: the worker thread ends within a second, nothing is added,
+    and until it has ended no second run can start (operators' poll, the Python API)."""
+    run = _operators(addon).RUN
+    op, context, before = _start(addon, 128, method="agndc")
+    deadline = time.perf_counter() + 120
+    while "scale 0" not in run.message:  # inside the finest scale: the longest single step
+        assert op._thread.is_alive() and time.perf_counter() < deadline, run.message
+        assert op.modal(context, TIMER) == {"PASS_THROUGH"}
+        time.sleep(0.05)
+    # one run at a time: the buttons are disabled and scripts are refused
+    assert not bpy.ops.object.agndc_remesh.poll()
+    assert not bpy.ops.import_mesh.agndc_grid.poll()
+    with pytest.raises(RuntimeError, match="running"):
+        bpy.ops.object.agndc_remesh(method="mc", resolution=16)
+    with pytest.raises(addon.core.errors.AGNDCError, match="Another AGNDC remesh is running"):
+        addon.remesh.remesh_object(bpy.data.objects["Part"],
+                                   addon.remesh.Settings(method="mc", resolution=16))
+    pressed = time.perf_counter()
+    assert op.modal(context, ESC) == {"RUNNING_MODAL"}  # waits for the worker to stop
+    assert any(kind == "label" and "Cancelling" in text
+               for kind, text in _status_bar(context))
+    op._thread.join(10)
+    stopped = time.perf_counter() - pressed
+    assert not op._thread.is_alive()
+    assert stopped < 2.0, f"the network took {stopped:.2f} s to stop"
+    assert op.modal(context, TIMER) == {"CANCELLED"}
+    assert scene_state() == before
+    assert not run.active and bpy.ops.object.agndc_remesh.poll()
+    print(f"Esc at 128³ (AGNDC, 1 thread): worker stopped after {stopped:.3f} s")
 
 
 def test_draw_functions(addon):
@@ -139,7 +180,86 @@ def test_draw_functions(addon):
     for _, draw in panels.MENU_HOOKS:
         draw(fake, bpy.context)
     props = [name for kind, name in log if kind == "prop"]
-    assert props == ["resolution", "method", "threads", "compare_mc", "smooth"]
+    assert props == ["method", "size_mode", "voxel_size", "use_modifiers", "output",
+                     "compare_mc", "smooth", "threads"]
+    labels = [text for kind, text in log if kind == "label"]
+    (grid,) = [re.fullmatch(r"Part: (\d+) × (\d+) × (\d+) voxels", t) for t in labels
+               if t.startswith("Part: ")]
+    assert max(map(int, grid.groups())) == 42  # 2 units at the default 0.05 + 2 margins
+    assert any(text.startswith("Estimated time: ") for text in labels)
     operators = [name for kind, name in log if kind == "operator"]
     assert operators.count("object.agndc_remesh") == 3  # sidebar, Object Data, Object menu
     assert operators.count("import_mesh.agndc_grid") == 2  # sidebar, File > Import
+
+
+def test_sidebar_shows_the_progress_of_a_run(addon):
+    operators, panels = _operators(addon), importlib.import_module(f"{addon.module}.panels")
+    operators.RUN.begin(object())
+    try:
+        operators.RUN.fraction, operators.RUN.message = 0.42, "Part: AGNDC scale 0"
+        log = []
+        panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)),
+                                           bpy.context)
+        assert ("progress", 0.42) in log and ("label", "Part: AGNDC scale 0") in log
+        assert not bpy.ops.object.agndc_remesh.poll()
+    finally:
+        operators.RUN.end()
+
+
+def test_estimate_and_confirmation(addon):
+    """The grid and time shown before a run; runs estimated above 10 s ask first."""
+    operators, panels = _operators(addon), importlib.import_module(f"{addon.module}.panels")
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    cube = bpy.context.object
+    settings = bpy.context.scene.agndc
+    settings.size_mode, settings.voxel_size, settings.method = "VOXEL_SIZE", 0.05, "agndc"
+    shape, quick, problem = panels.preview(cube, settings, bpy.context)
+    assert shape == (42, 42, 42) and problem == "" and 0 < quick < 10
+    settings.voxel_size = 2 / 254  # 256³
+    shape, slow, _ = panels.preview(cube, settings, bpy.context)
+    assert shape == (256, 256, 256) and slow > 10 * quick
+    settings.voxel_size = 1e-4
+    assert "at least" in panels.preview(cube, settings, bpy.context)[2]
+    remesh = addon.remesh
+    jobs = remesh.mesh_jobs([cube], remesh.Settings(method="agndc", voxel_size=0.05))
+    assert operators.confirm_message(jobs) == ""
+    jobs = remesh.mesh_jobs([cube], remesh.Settings(method="agndc", voxel_size=2 / 254))
+    message = operators.confirm_message(jobs)
+    assert message.startswith("1 object (Cube 256×256×256): about ") and "Esc cancels" in message
+    assert abs(jobs[0].estimate - slow) / slow < 0.2  # the panel and the operator agree
+
+
+def test_help_button_opens_the_manifest_website(addon):
+    panels = importlib.import_module(f"{addon.module}.panels")
+    log = []
+    panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)), bpy.context)
+    assert ("operator", "wm.url_open") in log or not panels.help_url()
+    panels.help_url.cache_clear()
+    original = panels.help_url
+    panels.help_url = lambda: "https://example.org/agndc/docs/blender.md"
+    try:
+        log.clear()
+        panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)),
+                                           bpy.context)
+        assert ("operator", "wm.url_open") in log
+    finally:
+        panels.help_url = original
+
+
+def test_drag_and_drop_handler(addon):
+    handler = bpy.types.AGNDC_FH_voxel_grid
+    assert handler.bl_import_operator == "import_mesh.agndc_grid"
+    assert set(handler.bl_file_extensions.split(";")) == {".npy", ".npz", ".binvox", ".vox",
+                                                          ".nii", ".nii.gz"}
+    assert handler.poll_drop(SimpleNamespace(area=SimpleNamespace(type="VIEW_3D")))
+    assert not handler.poll_drop(SimpleNamespace(area=SimpleNamespace(type="PROPERTIES")))
+    rna = bpy.ops.import_mesh.agndc_grid.get_rna_type()
+    assert {"directory", "files", "filepath"} <= set(rna.properties.keys())
+
+
+def test_grid_preview_has_no_numbers_for_non_meshes(addon):
+    panels = importlib.import_module(f"{addon.module}.panels")
+    bpy.ops.object.camera_add()
+    log = []
+    panels._draw_preview(RecordingLayout(log), bpy.context, bpy.context.scene.agndc)
+    assert log == [("label", "Select mesh objects to remesh")]

@@ -13,6 +13,7 @@ from agndc_core.errors import GridError, GridFileError, MeshError
 from agndc_core.grid import VoxelGrid
 from agndc_core.gridio import (
     GRID_EXTENSIONS,
+    grid_model_count,
     is_grid_path,
     is_mesh_path,
     load_grid,
@@ -278,6 +279,19 @@ def test_vox_two_models(tmp_path):
     assert load_grid(tmp_path / "two.vox").shape == (3, 3, 3)
     with pytest.raises(GridFileError, match="2 models"):
         load_grid(tmp_path / "two.vox", model_index=2)
+    assert grid_model_count(tmp_path / "two.vox") == 2
+
+
+def test_grid_model_count(tmp_path):
+    (tmp_path / "one.vox").write_bytes(vox_bytes([((3, 3, 3), [[0, 0, 0]])]))
+    np.save(tmp_path / "a.npy", sparse_grid())
+    assert grid_model_count(tmp_path / "one.vox") == 1
+    assert grid_model_count(tmp_path / "a.npy") == 1
+    (tmp_path / "garbage.vox").write_bytes(b"this is not a voxel file at all")
+    with pytest.raises(GridFileError, match="garbage.vox.*not a MagicaVoxel"):
+        grid_model_count(tmp_path / "garbage.vox")
+    with pytest.raises(GridFileError, match="no such file|not found|missing|exist"):
+        grid_model_count(tmp_path / "missing.vox")
 
 
 def test_bad_vox_files(tmp_path):

@@ -83,6 +83,36 @@ def test_progress_and_cancel(net):
     assert issubclass(CancelledError, AGNDCError)
 
 
+def test_cancel_is_checked_inside_the_network(net):
+    """Not only between tiles and scales (4 checks here): on every torch call of the network,
+    so a long single tile stops at once."""
+    lattice = lattice_of((24, 24, 24), (12, 12, 12), 6, ((0, 0), (0, 0), (0, 0)))
+
+    class CancelOnCall:
+        calls = 0
+
+        def is_set(self):
+            self.calls += 1
+            return self.calls >= 60
+
+    cancel = CancelOnCall()
+    with pytest.raises(CancelledError):
+        predict_lattice(net, lattice, cancel=cancel, tile=0)
+    assert cancel.calls == 60  # raised on the first check that saw the event set
+
+
+def test_progress_inside_a_tile(net, monkeypatch):
+    import agndc_core.inference as inference
+
+    monkeypatch.setattr(inference, "PROGRESS_INTERVAL", 0.0)
+    lattice = lattice_of((24, 24, 24), (12, 12, 12), 6, ((0, 0), (0, 0), (0, 0)))
+    calls = []
+    predict_lattice(net, lattice, tile=0, progress=lambda f, m: calls.append(f))
+    assert len(calls) > 100  # 3 scales in one tile each: far more reports than tiles
+    assert calls == sorted(calls) and 0.0 <= calls[0] and calls[-1] == 1.0
+    assert len(set(calls)) > 10  # the bar moves within the scales, not only between them
+
+
 def test_rejects_bad_input(net):
     with pytest.raises(GridError):
         predict_lattice(net, np.zeros((4, 4)))

@@ -1,0 +1,264 @@
+"""Before a run: the grid a voxel size gives, how long the run will take, and what a mesh lacks.
+
+Front ends (the Blender add-on) show these before they start; they are bpy-free so they are
+tested here:
+
+* ``plan_grid``: a voxel size (world units) or a resolution -> the grid ``voxelize`` will make,
+  with the core's limits (``RESOLUTION_MIN``..``RESOLUTION_MAX``, ``grid.MAX_VOXELS``);
+* ``estimate_seconds``: the time of a run from its lattice size and its surface (the expected
+  number of crossed lattice edges, ``mesh_crossings`` / ``grid_crossings``), from
+  ``CALIBRATION`` measured on a 2-core CPU;
+* ``open_edge_count``: edges with one face only (the mesh is not closed);
+* ``nearest_face_values``: per-face values (material indices) carried onto a new mesh.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import MeshError
+from .grid import MAX_VOXELS
+
+#: ``voxelize``'s limits on ``resolution`` (voxels along the longest side, one empty voxel of
+#: margin on each side); tests/core/test_plan.py checks that voxelize agrees
+RESOLUTION_MIN, RESOLUTION_MAX = 3, 1024
+MARGIN = 1
+
+#: Seconds of a run, per method: (s per million crossed lattice edges, s per million lattice
+#: points, fixed s), a non-negative least-squares fit to whole ``pipeline.remesh_mesh`` runs
+#: (voxelise, labels or network, contouring) of generated shapes 11 (CAD), 7 (organic) and 40
+#: (smooth) at 48³, 96³ and 144³ with 1 torch thread, on a 2-core Linux VM while a training job
+#: used most of the other core: ``python benchmarks/bench_estimate.py`` (2026-11-24; it prints this
+#: table). The fits are within -25..+35 % (agndc), -15..+52 % (undc), -19..+52 % (mc) and
+#: -57..+103 % (sharp, whose runs are short and were the noisiest) of the measured runs: the
+#: estimate says "about", not "exactly". More threads (an idle machine) make runs faster.
+#: "distance" is the Chamfer distance of one output to its source (30k samples), per output.
+CALIBRATION = {
+    "agndc": (352.0, 0.307, 0.0),
+    "undc": (17.5, 1.49, 0.42),
+    "mc": (0.111, 0.128, 0.0163),
+    "sharp": (18.7, 0.0, 0.421),
+    "distance": (0.851, 0.0, 0.267),
+}
+#: the Blender operator asks before a run estimated longer than this (seconds)
+CONFIRM_SECONDS = 10.0
+
+
+@dataclass(frozen=True)
+class GridPlan:
+    """The grid ``voxelize(vertices, faces, resolution)`` makes for a mesh of a given extent."""
+
+    resolution: int  # voxels along the longest side, margins included (voxelize's argument)
+    shape: tuple  # (X, Y, Z) voxels
+    voxel_size: float  # edge of a voxel, in the units of the extent
+
+    @property
+    def voxels(self) -> int:
+        return math.prod(self.shape)
+
+
+def plan_grid(extent, *, voxel_size: float | None = None, resolution: int | None = None,
+              source: str = "mesh") -> GridPlan:
+    """The grid for a mesh whose bounding box has size ``extent`` (3,), from one of
+    ``voxel_size`` (the largest voxel edge wanted, same units as ``extent``) or ``resolution``.
+
+    Raises:
+        MeshError: zero extent, a voxel size <= 0, or a grid outside the core's limits (the
+            message says which voxel size or resolution would work).
+    """
+    extent = np.asarray(extent, dtype=np.float64).reshape(3)
+    longest = float(extent.max())
+    if not np.all(np.isfinite(extent)) or longest <= 0:
+        raise MeshError(f"{source}: the mesh has zero size or invalid coordinates")
+    if (voxel_size is None) == (resolution is None):
+        raise ValueError("give exactly one of voxel_size and resolution")
+    if voxel_size is not None:
+        if not voxel_size > 0:
+            raise MeshError(f"{source}: the voxel size must be positive, got {voxel_size}")
+        # relative slack: float32 coordinates (Blender's) put 2.0000002 / (2 / 700) a hair
+        # above 700
+        resolution = max(math.ceil(longest / voxel_size * (1 - 1e-6)), 1) + 2 * MARGIN
+        if resolution > RESOLUTION_MAX:
+            finest = longest / (RESOLUTION_MAX - 2 * MARGIN)
+            raise MeshError(f"{source}: a voxel size of {voxel_size:.4g} gives {resolution:,} "
+                            f"voxels along its longest side ({longest:.4g}), more than "
+                            f"{RESOLUTION_MAX}; use a voxel size of at least {_up(finest)}")
+    elif not RESOLUTION_MIN <= int(resolution) <= RESOLUTION_MAX:
+        raise MeshError(f"{source}: resolution must be in [{RESOLUTION_MIN}, {RESOLUTION_MAX}], "
+                        f"got {resolution}")
+    plan = _plan(extent, int(resolution))
+    if plan.voxels > MAX_VOXELS:
+        finest = _finest_voxel(extent)
+        raise MeshError(f"{source}: a {'×'.join(map(str, plan.shape))} grid has "
+                        f"{plan.voxels:,} voxels, more than the {MAX_VOXELS:,} the remesher "
+                        f"handles; use a voxel size of at least {_up(finest)}")
+    return plan
+
+
+def _plan(extent: np.ndarray, resolution: int) -> GridPlan:
+    """``voxelize``'s own arithmetic: the longest side gets ``resolution`` voxels."""
+    voxel = float(extent.max()) / (resolution - 2 * MARGIN)
+    counts = np.maximum(np.ceil(extent / voxel - 1e-9).astype(int), 1) + 2 * MARGIN
+    counts[np.argmax(extent)] = resolution
+    return GridPlan(resolution, tuple(int(n) for n in counts), voxel)
+
+
+def _finest_voxel(extent: np.ndarray) -> float:
+    """The smallest voxel size whose grid stays within MAX_VOXELS (bisection on resolution)."""
+    lo, hi = RESOLUTION_MIN, RESOLUTION_MAX
+    while lo < hi:  # at most 10 steps
+        mid = (lo + hi + 1) // 2
+        lo, hi = (mid, hi) if _plan(extent, mid).voxels <= MAX_VOXELS else (lo, mid - 1)
+    return _plan(extent, lo).voxel_size
+
+
+def _up(value: float) -> str:
+    """``value`` rounded up to 3 significant digits, as text."""
+    digits = 2 - math.floor(math.log10(value))
+    return f"{math.ceil(value * 10 ** digits) / 10 ** digits:.{max(digits, 0)}f}"
+
+
+def mesh_crossings(vertices, faces, voxel_size: float) -> float:
+    """Expected number of lattice edges a mesh crosses at ``voxel_size``: the area it shows to
+    each axis (sum of |normal component| x area) over the area of a voxel face.
+
+    Args:
+        vertices: (V, 3) float, in the frame the grid is built in; faces: (F, 3) int.
+    """
+    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    # (F, 3): twice the area times the unit normal
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    return area_crossings(cross / 2.0, voxel_size)
+
+
+def area_crossings(area_vectors, voxel_size: float) -> float:
+    """``mesh_crossings`` from (F, 3) area vectors (unit normal x area) of the faces."""
+    return float(np.abs(np.asarray(area_vectors, dtype=np.float64)).sum()) / voxel_size ** 2
+
+
+def grid_crossings(occupancy: np.ndarray) -> int:
+    """Number of lattice edges a grid's surface crosses (neighbouring voxels that differ, with
+    the empty padding around the grid)."""
+    padded = np.pad(np.asarray(occupancy, dtype=bool), 1)
+    return int(sum(np.count_nonzero(np.diff(padded, axis=axis)) for axis in range(3)))
+
+
+def estimate_seconds(method: str, shape, crossings: float, *, distances: int = 0) -> float:
+    """Estimated seconds of one remesh (``CALIBRATION``), plus ``distances`` Chamfer distances.
+
+    Args:
+        method: a key of ``CALIBRATION``; shape: (3,) voxels of the grid; crossings: crossed
+            lattice edges (``mesh_crossings`` or ``grid_crossings``).
+    """
+    points = math.prod(int(n) + 2 for n in shape)  # the padded lattice
+    total = _seconds(CALIBRATION[method], crossings, points)
+    return total + distances * _seconds(CALIBRATION["distance"], crossings, 0)
+
+
+def _seconds(row, crossings: float, points: float) -> float:
+    per_crossing, per_point, fixed = row
+    return (per_crossing * crossings + per_point * points) / 1e6 + fixed
+
+
+def open_edge_count(vertices, faces) -> int:
+    """Edges used by exactly one face, after welding vertices at identical positions (so a mesh
+    split along UV seams or an unwelded STL is not counted as open). 0 for a closed mesh."""
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if len(faces) == 0:
+        return 0
+    _, weld = np.unique(vertices, axis=0, return_inverse=True)
+    welded = weld.reshape(-1)[faces]  # (F, 3)
+    edges = np.sort(welded[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)  # (3F, 2)
+    edges = edges[edges[:, 0] != edges[:, 1]]  # collapsed by the weld
+    keys = edges[:, 0] * (int(welded.max()) + 1) + edges[:, 1]
+    _, counts = np.unique(keys, return_counts=True)
+    return int(np.count_nonzero(counts == 1))
+
+
+def is_planar(vertices, rtol: float = 1e-6) -> bool:
+    """All points in one plane (up to ``rtol`` of their spread): an open mesh like this (a
+    plane, a single triangle) encloses nothing, whatever a voxeliser makes of it."""
+    points = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if len(points) < 4:
+        return True
+    # (3,) spreads along the principal axes
+    spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False)
+    return bool(spread[-1] <= rtol * spread[0])
+
+
+def nearest_face_values(vertices, faces, values, points, *, samples: int = 200_000,
+                        seed: int = 0) -> np.ndarray:
+    """The value of the source face nearest to each point, e.g. material indices for the
+    centroids of a remeshed surface.
+
+    Nearest is approximated by the nearest of the face centroids and ``samples`` area-weighted
+    surface samples (each tagged with its face); exact for points on the source's flat regions.
+
+    Args:
+        vertices: (V, 3) float; faces: (F, 3) int; values: (F,) per-face values;
+        points: (P, 3) float queries.
+
+    Returns:
+        (P,) values, dtype of ``values``.
+    """
+    values = np.asarray(values)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(values) == 0 or np.all(values == values[0]):
+        return np.full(len(points), values[0] if len(values) else 0, dtype=values.dtype)
+    from scipy.spatial import cKDTree
+
+    triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0],
+                                   triangles[:, 2] - triangles[:, 0]), axis=1)  # (F,) 2x area
+    rng = np.random.default_rng(seed)
+    owner = np.arange(len(triangles))
+    if area.sum() > 0 and samples > 0:
+        owner = np.concatenate([owner, rng.choice(len(triangles), samples, p=area / area.sum())])
+    uv = rng.random((len(owner), 2))  # folded onto the triangle: uniform barycentrics
+    uv[: len(triangles)] = 1.0 / 3.0  # the centroids first
+    fold = uv.sum(axis=1) > 1
+    uv[fold] = 1 - uv[fold]
+    t = triangles[owner]  # (S, 3, 3)
+    sample = t[:, 0] + uv[:, :1] * (t[:, 1] - t[:, 0]) + uv[:, 1:] * (t[:, 2] - t[:, 0])
+    _, nearest = cKDTree(sample).query(points)
+    return values[owner[nearest]]
+
+
+#: gap between side-by-side results, as a fraction of the result's width along the direction
+SIDE_GAP = 0.25
+
+
+def free_offset(lo, hi, direction, occupied_lo, occupied_hi, *, start: int = 1,
+                tries: int = 1000) -> np.ndarray:
+    """Where to put a box beside others: the first of the offsets k x step x ``direction``
+    (k = start, start + 1, ...) at which the box [lo, hi] overlaps none of the occupied boxes.
+
+    ``step`` is the box's width along ``direction`` plus ``SIDE_GAP`` of it, so results line up
+    one after another. Boxes that only touch do not overlap.
+
+    Args:
+        lo, hi: (3,) the box at offset 0; direction: (3,) any length (normalised here);
+        occupied_lo, occupied_hi: (N, 3) boxes to avoid.
+
+    Returns:
+        (3,) the offset to add (the one for k = start + tries - 1 if every offset overlaps).
+    """
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    direction = np.asarray(direction, dtype=np.float64)
+    direction = direction / max(float(np.linalg.norm(direction)), 1e-300)
+    width = float(np.abs(direction) @ (hi - lo))
+    step = direction * (width * (1 + SIDE_GAP) if width > 0 else 1.0)
+    shifts = (start + np.arange(tries))[:, None] * step  # (K, 3)
+    occupied_lo = np.asarray(occupied_lo, dtype=np.float64).reshape(-1, 3)
+    occupied_hi = np.asarray(occupied_hi, dtype=np.float64).reshape(-1, 3)
+    # (K, N): the shifted box overlaps occupied box n on all three axes
+    tol = 1e-9 * max(width, 1.0)
+    overlap = np.all((lo + shifts)[:, None] < occupied_hi[None] - tol, axis=2) & \
+        np.all((hi + shifts)[:, None] > occupied_lo[None] + tol, axis=2)
+    free = ~overlap.any(axis=1)
+    k = int(np.argmax(free)) if free.any() else tries - 1
+    return shifts[k]
