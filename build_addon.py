@@ -70,13 +70,15 @@ PLATFORM_TAGS = {
 }
 
 #: what agndc_core imports at run time in Blender (torch and the libraries imported by the
-#: remesh, grid-IO and metrics paths); numpy is Blender's own. manifold3d (training shapes only),
-#: tqdm (CLI only), rtree and matplotlib are not needed inside Blender.
+#: remesh, grid-IO and metrics paths); numpy is Blender's own. rtree backs trimesh's closest-point
+#: query, which sharp mode's labels use for cells no surface sample fell into. manifold3d
+#: (training shapes only), tqdm (CLI only) and matplotlib are not needed inside Blender.
 RUNTIME_REQUIREMENTS = [
     "torch==2.13.0",
     "scipy>=1.11",
     "scikit-image>=0.22",
     "trimesh>=4.0",
+    "rtree>=1.0",
     "nibabel>=5.0",
     "safetensors>=0.4",
 ]
