@@ -165,6 +165,8 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     _require_extension(path, MESH_EXTENSIONS, "mesh")
     _require_file(path)
+    if path.suffix.lower() == ".stl":
+        _require_stl_layout(path)
     with _reading(path.name, "cannot read the mesh"):
         try:
             loaded = trimesh.load(path, force="mesh", process=False)
@@ -185,6 +187,19 @@ def load_mesh(path) -> tuple[np.ndarray, np.ndarray]:
         mesh.remove_unreferenced_vertices()
         mesh.merge_vertices()
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def _require_stl_layout(path: Path) -> None:
+    """Refuse a .stl that is neither binary STL (84 + 50 n bytes, n read at byte 80) nor ASCII
+    STL (text starting with ``solid``). Without this, random bytes decode as an ASCII STL with
+    no facets wherever trimesh can guess a text encoding, and read as "a mesh without faces"."""
+    size = path.stat().st_size
+    with open(path, "rb") as handle:
+        head = handle.read(84)
+    binary = size >= 84 and size == 84 + 50 * int.from_bytes(head[80:84], "little")
+    if not binary and not head.lstrip().lower().startswith(b"solid"):
+        raise GridFileError(f"{path.name}: cannot read the mesh: neither a binary STL (its size "
+                            "does not match its triangle count) nor an ASCII STL")
 
 
 def save_mesh(vertices, faces, path) -> None:

@@ -368,5 +368,9 @@ def test_mesh_errors(tmp_path):
         assert load_mesh(tmp_path / "latin1.obj")[1].shape == (1, 3)
     with pytest.raises(GridFileError, match="missing.stl"):
         load_mesh(tmp_path / "missing.stl")
+    # random bytes: named as unreadable, whatever encoding trimesh could guess for them
+    (tmp_path / "noise.stl").write_bytes(np.random.default_rng(12).bytes(3000))
+    with pytest.raises(GridFileError, match="noise.stl: cannot read the mesh: neither a binary"):
+        load_mesh(tmp_path / "noise.stl")
     with pytest.raises(GridFileError, match="unsupported"):
         save_mesh(np.eye(3), [[0, 1, 2]], tmp_path / "out.fbx")

@@ -63,14 +63,19 @@ def test_batch_folder(inputs, tmp_path):
 def test_batch_failing_input_gives_nonzero_status(inputs, tmp_path):
     np.save(inputs / "empty.npy", np.zeros((8, 8, 8), dtype=bool))
     (inputs / "broken.binvox").write_bytes(b"not a binvox file")
+    (inputs / "noise.stl").write_bytes(np.random.default_rng(12).bytes(3000))
     out = tmp_path / "out"
     result = _batch("--input", inputs, "--output", out, "--res", 24, "--method", "mc",
                     "--no-distance", tmp_path=tmp_path)
     assert result.returncode == 1
     assert "FAILED" in result.stderr and "empty.npy" in result.stderr
-    status = {r["input"].rsplit("/", 1)[-1]: r["status"] for r in _rows(out)}
-    assert status == {"part.obj": "ok", "block.npy": "ok", "empty.npy": "failed",
-                      "broken.binvox": "failed"}
+    rows = {r["input"].rsplit("/", 1)[-1]: r for r in _rows(out)}
+    assert {name: r["status"] for name, r in rows.items()} == {
+        "part.obj": "ok", "block.npy": "ok", "empty.npy": "failed", "broken.binvox": "failed",
+        "noise.stl": "failed"}
+    # random bytes are named as an unreadable file, not as a mesh "without faces"
+    assert "cannot read" in rows["noise.stl"]["error"]
+    assert "no faces" not in rows["noise.stl"]["error"]
     assert (out / "part_MC.obj").is_file()  # the good inputs are still done
 
 
