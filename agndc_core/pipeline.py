@@ -236,20 +236,14 @@ def remesh_file(path, *, method: str = "agndc", resolution: int = 64,
 
 
 def resolution_for_voxel_size(vertices_vx3: np.ndarray, voxel_size: float, *,
-                              source: str = "mesh", margin: int = 1) -> int:
-    """The ``voxelize`` resolution whose voxels are at most ``voxel_size`` world units.
+                              source: str = "mesh") -> int:
+    """The ``voxelize`` resolution whose voxels are at most ``voxel_size`` world units
+    (``plan.plan_grid``, which also names the mesh and the limit when it is out of range)."""
+    from .plan import plan_grid
 
-    ``voxelize`` spreads the longest bounding-box side over ``resolution - 2 * margin`` voxels,
-    so this is ``ceil(longest side / voxel_size) + 2 * margin`` (the voxels come out exactly
-    ``voxel_size`` when the side is a multiple of it, a little smaller otherwise). Out-of-range
-    results are left to ``voxelize``, which names the mesh and the limit.
-    """
-    if not (np.isfinite(voxel_size) and voxel_size > 0):
-        raise AGNDCError(f"{source}: voxel size must be a positive number, got {voxel_size}")
     vertices = np.asarray(vertices_vx3, dtype=np.float64).reshape(-1, 3)
-    extent = float(np.ptp(vertices, axis=0).max()) if len(vertices) else 0.0
-    # a small relative slack so that a side of exactly k voxels is not rounded up to k + 1
-    return int(np.ceil(extent / voxel_size * (1 - 1e-9))) + 2 * margin
+    extent = np.ptp(vertices, axis=0) if len(vertices) else np.zeros(3)
+    return plan_grid(extent, voxel_size=voxel_size, source=source).resolution
 
 
 def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel):

@@ -21,6 +21,7 @@ import numpy as np
 
 from .errors import MeshError
 from .grid import MAX_VOXELS
+from .voxelize import grid_layout
 
 #: ``voxelize``'s limits on ``resolution`` (voxels along the longest side, one empty voxel of
 #: margin on each side); tests/core/test_plan.py checks that voxelize agrees
@@ -99,10 +100,8 @@ def plan_grid(extent, *, voxel_size: float | None = None, resolution: int | None
 
 
 def _plan(extent: np.ndarray, resolution: int) -> GridPlan:
-    """``voxelize``'s own arithmetic: the longest side gets ``resolution`` voxels."""
-    voxel = float(extent.max()) / (resolution - 2 * MARGIN)
-    counts = np.maximum(np.ceil(extent / voxel - 1e-9).astype(int), 1) + 2 * MARGIN
-    counts[np.argmax(extent)] = resolution
+    """The grid ``voxelize`` makes at ``resolution`` (its own arithmetic, ``grid_layout``)."""
+    voxel, counts = grid_layout(extent, resolution, MARGIN)
     return GridPlan(resolution, tuple(int(n) for n in counts), voxel)
 
 

@@ -47,14 +47,24 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     if not 2 * margin + 1 <= resolution <= 1024:
         raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], got {resolution}")
     lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    voxel = float((hi - lo).max()) / (resolution - 2 * margin)
-    counts = np.maximum(np.ceil((hi - lo) / voxel - 1e-9).astype(int), 1) + 2 * margin
-    counts[np.argmax(hi - lo)] = resolution
+    voxel, counts = grid_layout(hi - lo, resolution, margin)
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
     origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
     occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule))
     return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source)
+
+
+def grid_layout(extent, resolution: int, margin: int = 1) -> tuple[float, np.ndarray]:
+    """Voxel size and (3,) int voxel counts of the grid ``voxelize`` makes for a bounding box of
+    size ``extent``: the longest side spans ``resolution - 2 * margin`` voxels, every axis gets
+    ``margin`` empty voxels at each end (the one place this arithmetic lives; ``plan.py`` asks
+    it what a grid will be before voxelising)."""
+    extent = np.asarray(extent, dtype=np.float64).reshape(3)
+    voxel = float(extent.max()) / (resolution - 2 * margin)
+    counts = np.maximum(np.ceil(extent / voxel - 1e-9).astype(int), 1) + 2 * margin
+    counts[np.argmax(extent)] = resolution
+    return voxel, counts
 
 
 def check_mesh(vertices, faces, source: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
