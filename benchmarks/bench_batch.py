@@ -5,8 +5,9 @@ The baseline is ``--workers 1``: the jobs run one after another in this process,
 every core (what ``agndc batch --workers 1`` does). The pool and the cluster start ``--workers``
 processes with ``cores // workers`` torch threads each. Wall times include starting the pool or
 the cluster, as a user sees them. Peak memory is each worker process's peak resident set
-(``getrusage``, returned in its rows). All outputs are checked to be byte-identical across the
-three runs.
+(``getrusage``, returned in its rows). All outputs are checked to be the same meshes across the
+three runs: the same faces, vertices equal up to float rounding (torch's sums differ in the last
+bits between 2 threads in one process and 1 thread per worker).
 
 Usage: python benchmarks/bench_batch.py [--n 16] [--res 48] [--workers 2] [--method agndc]
 """
@@ -19,7 +20,10 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from agndc_core.batch import cpu_count, remesh_many
+from agndc_core.gridio import load_mesh
 
 
 def make_grids(folder: Path, n: int, res: int) -> None:
@@ -69,10 +73,13 @@ def main() -> None:
             run(f"dask LocalCluster x{args.workers}", grids, tmp / "dask",
                 workers=args.workers, engine="dask", **common),
         ]
-        for result in results[1:]:  # the same meshes, byte for byte
+        worst = 0.0
+        for result in results[1:]:  # the same meshes (up to float rounding of the network)
             for row in result["rows"]:
-                name = Path(row["output"]).name
-                assert Path(row["output"]).read_bytes() == (tmp / "serial" / name).read_bytes()
+                got_v, got_f = load_mesh(row["output"])
+                want_v, want_f = load_mesh(tmp / "serial" / Path(row["output"]).name)
+                assert np.array_equal(got_f, want_f) and got_v.shape == want_v.shape
+                worst = max(worst, float(np.abs(got_v - want_v).max()))
 
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     print(f"{args.n} grids at {args.res}^3, method {args.method}, {cpu_count()} cores, "
@@ -84,7 +91,8 @@ def main() -> None:
         peaks = ", ".join(f"{v:.0f}" for v in sorted(r["peaks"].values()))
         print(f"{r['name']:<24} {r['wall']:7.2f} {args.n / r['wall']:8.2f} "
               f"{base / r['wall']:7.2f}x {r['job_seconds']:6.2f}  {peaks}")
-    print("outputs identical across the three engines")
+    print(f"outputs: the same faces across the three engines, vertices within {worst:.1e} "
+          "voxels")
 
 
 if __name__ == "__main__":
