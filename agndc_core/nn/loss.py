@@ -38,7 +38,8 @@ QUADRIC_FLOOR = 0.1
 
 def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Tensor,
                        surface: torch.Tensor, valid: torch.Tensor | None = None,
-                       quadric: torch.Tensor | None = None
+                       quadric: torch.Tensor | None = None,
+                       quadric_floor: float = QUADRIC_FLOOR
                        ) -> tuple[torch.Tensor, torch.Tensor]:
     """(L_V, L_E) of one scale.
 
@@ -49,6 +50,7 @@ def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Ten
         surface: (B, X, Y, Z) bool, cells that have a vertex (and are valid).
         valid: optional (B, X, Y, Z) bool, points whose edges are scored (default: all).
         quadric: optional (B, X, Y, Z, 6) float normal quadrics (xx, yy, zz, xy, yz, zx).
+        quadric_floor: weight of the plain squared distance added to the quadric term.
 
     Returns:
         two scalar tensors.
@@ -72,7 +74,7 @@ def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Ten
                    + q[..., 2] * d[..., 2] ** 2 + 2 * (q[..., 3] * d[..., 0] * d[..., 1]
                                                       + q[..., 4] * d[..., 1] * d[..., 2]
                                                       + q[..., 5] * d[..., 2] * d[..., 0]))
-        squared = squared + QUADRIC_FLOOR * (d**2).sum(-1)
+        squared = squared + quadric_floor * (d**2).sum(-1)
     loss_v = (squared * mask).sum() / mask.sum().clamp_min(1.0)
     bce = F.binary_cross_entropy_with_logits(pred[..., 3:].float(), edge.float(), reduction="none")
     if valid is None:
@@ -86,9 +88,13 @@ def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Ten
 class AGNDCLoss(nn.Module):
     """``L_V + exp(-t) L_E + t`` with learnable ``t`` (module docstring)."""
 
-    def __init__(self, init_lambda: float = 1.0, train_edges: bool = True):
+    def __init__(self, init_lambda: float = 1.0, train_edges: bool = True,
+                 quadric_floor: float = QUADRIC_FLOOR):
         super().__init__()
         self.train_edges = train_edges
+        if not quadric_floor >= 0:
+            raise ModelError(f"quadric_floor must be >= 0, got {quadric_floor}")
+        self.quadric_floor = float(quadric_floor)
         if not init_lambda > 0:
             raise ModelError(f"init_lambda must be > 0, got {init_lambda}")
         self.t = nn.Parameter(torch.tensor(-math.log(init_lambda)))
@@ -101,7 +107,8 @@ class AGNDCLoss(nn.Module):
     def forward(self, pred, vertex, edge, surface, valid=None, quadric=None
                 ) -> tuple[torch.Tensor, dict]:
         """Total loss and its parts ({"vertex", "edge", "lambda"}, detached floats)."""
-        loss_v, loss_e = vertex_edge_losses(pred, vertex, edge, surface, valid, quadric)
+        loss_v, loss_e = vertex_edge_losses(pred, vertex, edge, surface, valid, quadric,
+                                            self.quadric_floor)
         parts = {"vertex": float(loss_v.detach()), "edge": float(loss_e.detach()),
                  "lambda": float(self.weight.detach()) if self.train_edges else 0.0}
         if not self.train_edges:

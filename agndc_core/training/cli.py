@@ -34,6 +34,9 @@ def add_train_parser(sub) -> None:
                    "wall time (continue with --resume): chunks on a time-limited GPU lease")
     p.add_argument("--val-steps", default="", help="finest-scale steps after which the --val "
                    "samples are scored (learning curve), e.g. 100,300,1000")
+    p.add_argument("--quadric-floor", type=float, default=None, help="weight of the plain "
+                   "squared vertex error beside the normal quadric (default 0.1; 1 pins "
+                   "vertices to their labels like MSE)")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)
@@ -74,6 +77,8 @@ def _cmd_train(args) -> int:
                       margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
                       workers=args.workers, init=args.init, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None)
+    if args.quadric_floor is not None:
+        cfg.quadric_floor = args.quadric_floor
     path = train(cfg, resume=args.resume)
     if path is None:
         print(f"stopped after {args.max_minutes} minutes; continue with --resume")

@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from ..errors import AGNDCError
+from ..nn.loss import QUADRIC_FLOOR
 from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
 
@@ -61,6 +62,9 @@ class TrainConfig:
     # stop cleanly (state saved, ``--resume`` continues) once this much wall time has passed:
     # one call on a lent GPU machine is limited to 10 minutes; None = no limit
     max_seconds: float | None = None
+    # weight of the plain squared vertex error beside the normal quadric (nn.loss): small lets a
+    # vertex slide along its face, 1 pins it to the labelled (QEF) vertex as plain MSE does
+    quadric_floor: float = QUADRIC_FLOOR
 
 
 class Trainer:
@@ -83,7 +87,8 @@ class Trainer:
         # the finest scale's edges are the input's crossing parity (inference always contours
         # the input's topology): no edge loss there, its gradient would train a dead head
         self.losses = torch.nn.ModuleList([
-            AGNDCLoss(train_edges=s != 0) for s in range(levels + 1)]).to(self.device)
+            AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor)
+            for s in range(levels + 1)]).to(self.device)
         if cfg.init:
             self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels)

@@ -105,6 +105,28 @@ def test_loss_rejects_mismatched_targets():
                     torch.zeros(1, 4, 4, 4, 3), torch.zeros(1, 4, 4, 4))
 
 
+def test_quadric_floor_adds_the_plain_squared_error():
+    """Vertex loss = d^T Q d + floor |d|^2 on surface cells: an error along a face (d _|_ n)
+    costs only the floor, one across it costs 1 + floor; floor 0 leaves along-face errors free."""
+    pred = torch.zeros(1, 6, 2, 2, 2)
+    vertex = torch.zeros(1, 2, 2, 2, 3)
+    vertex[..., 0] = 0.3  # the error is along x
+    surface = torch.ones(1, 2, 2, 2, dtype=torch.bool)
+    edge = torch.zeros(1, 2, 2, 2, 3)
+    along = torch.zeros(1, 2, 2, 2, 6)
+    along[..., 2] = 1.0  # Q = z z^T: a face of normal z, the error lies in it
+    across = torch.zeros(1, 2, 2, 2, 6)
+    across[..., 0] = 1.0  # Q = x x^T: the error crosses the face
+    for floor in (0.0, 0.1, 1.0):
+        loss = AGNDCLoss(train_edges=False, quadric_floor=floor)
+        v_along, _ = loss(pred, vertex, edge, surface, quadric=along)
+        v_across, _ = loss(pred, vertex, edge, surface, quadric=across)
+        assert float(v_along) == pytest.approx(floor * 0.09)
+        assert float(v_across) == pytest.approx((1 + floor) * 0.09)
+    with pytest.raises(ModelError, match="quadric_floor"):
+        AGNDCLoss(quadric_floor=-1.0)
+
+
 # ---------------------------------------------------------------------- band evaluation
 
 

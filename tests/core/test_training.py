@@ -134,6 +134,15 @@ def _held_out_loss(trainer, steps=range(10_000, 10_006)) -> float:
     return float(np.mean(losses))
 
 
+def test_quadric_floor_reaches_every_scale_loss(data_dir, tmp_path):
+    """The recipe's quadric floor is the one every scale's loss uses (default: nn.loss's)."""
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.quadric_floor = 0.7
+    trainer = Trainer(cfg)
+    assert [loss.quadric_floor for loss in trainer.losses] == [0.7] * 3
+    assert Trainer(_config(data_dir, tmp_path / "default")).losses[0].quadric_floor == 0.1
+
+
 def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_path):
     """An untrained network *is* surface nets (zero vertex heads + prior); a short run must do
     clearly better than that on batches it never saw. The single-scale plain-conv network
