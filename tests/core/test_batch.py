@@ -320,13 +320,16 @@ def test_killed_run_leaves_no_partial_output(spheres, tmp_path, sig):
     env = dict(os.environ, OMP_NUM_THREADS="1")
     process = subprocess.Popen(command, cwd=REPO, env=env, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE)
+    def finished():  # a file still being written (name.tmp-<pid>.ply) is not finished
+        return sorted(p for p in out.glob("*.ply") if TEMP_MARK not in p.name)
+
     deadline = time.monotonic() + 120
-    while not any(out.glob("*.ply")) and time.monotonic() < deadline:
+    while not finished() and time.monotonic() < deadline:
         time.sleep(0.01)
     process.send_signal(sig)
     _, err = process.communicate(timeout=60)
     time.sleep(1.5)  # after a SIGKILL the orphaned workers notice within 0.5 s and exit
-    done = sorted(out.glob("*.ply"))
+    done = finished()
     assert 0 < len(done) < N_SPHERES, "the run should have been stopped part way"
     if sig == signal.SIGINT:
         assert process.returncode == 130, err.decode()
