@@ -12,6 +12,7 @@ seeded by (seed, scale, step), so a resumed run draws the same crops as an unint
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -65,6 +66,10 @@ class TrainConfig:
     # weight of the plain squared vertex error beside the normal quadric (nn.loss): small lets a
     # vertex slide along its face, 1 pins it to the labelled (QEF) vertex as plain MSE does
     quadric_floor: float = QUADRIC_FLOOR
+    # exponential moving average of the trained scale's weights (decay per step; 0 = off). A
+    # batch of 4 crops makes every step noisy; the average is what validation scores and what
+    # the checkpoint keeps, and it is committed to the scale before finer scales train on it
+    ema: float = 0.0
 
 
 class Trainer:
@@ -95,6 +100,7 @@ class Trainer:
         self.log: list[dict] = []
         self.scale, self.step = levels, 0  # next step to run
         self.optimizer = self._optimizer(self.scale)
+        self.ema = self._start_ema(self.scale)
         self.seconds = 0.0
 
     def _warm_start(self, path: str) -> None:
@@ -114,6 +120,38 @@ class Trainer:
     def _optimizer(self, s: int):
         params = list(self.model.nets[s].parameters()) + list(self.losses[s].parameters())
         return torch.optim.AdamW(params, lr=self.cfg.lr, weight_decay=1e-4)
+
+    def _start_ema(self, s: int) -> dict | None:
+        """Averaged copies of scale s's parameters (None when ``cfg.ema`` is 0)."""
+        if not self.cfg.ema:
+            return None
+        return {k: p.detach().clone() for k, p in self.model.nets[s].named_parameters()}
+
+    def _update_ema(self, s: int) -> None:
+        if self.ema is None:
+            return
+        with torch.no_grad():
+            for k, p in self.model.nets[s].named_parameters():
+                self.ema[k].lerp_(p.detach(), 1.0 - self.cfg.ema)
+
+    @contextlib.contextmanager
+    def averaged(self):
+        """The model with the trained scale's averaged weights in it (no-op without EMA)."""
+        if self.ema is None:
+            yield self.model
+            return
+        net = self.model.nets[self.scale]
+        raw = {k: p.detach().clone() for k, p in net.named_parameters()}
+        self._load_net(self.scale, self.ema)
+        try:
+            yield self.model
+        finally:
+            self._load_net(self.scale, raw)
+
+    def _load_net(self, s: int, values: dict) -> None:
+        with torch.no_grad():
+            for k, p in self.model.nets[s].named_parameters():
+                p.copy_(values[k])
 
     def _lr(self, s: int, step: int) -> float:
         total = self.cfg.steps[s]
@@ -176,6 +214,7 @@ class Trainer:
         loss.backward()
         torch.nn.utils.clip_grad_norm_(self.model.nets[s].parameters(), 1.0)
         self.optimizer.step()
+        self._update_ema(s)
         return {"loss": float(loss.detach()), **parts}
 
     # ------------------------------------------------------------------ loop
@@ -192,6 +231,7 @@ class Trainer:
             if s < self.scale:
                 self.scale, self.step = s, 0
                 self.optimizer = self._optimizer(s)
+                self.ema = self._start_ema(s)
             total = self.cfg.steps[s]
             bar = tqdm(total=total, initial=self.step, desc=f"scale {s}", disable=not progress)
             window: list[dict] = []
@@ -220,6 +260,9 @@ class Trainer:
                     self.save_state()
                     return None
             bar.close()
+            if self.ema is not None:  # finer scales train on (and the checkpoint keeps) the average
+                self._load_net(s, self.ema)
+                self.ema = self._start_ema(s)
             self.save_state()
         metrics = self.validate() if self.cfg.val else {}
         return self.finish(metrics)
@@ -227,9 +270,10 @@ class Trainer:
     def validate(self) -> dict:
         from .validate import validate_model
 
-        self.model.eval()
-        return validate_model(self.model, self.cfg.val, count=self.cfg.val_count,
-                              n_samples=self.cfg.val_samples)
+        with self.averaged() as model:
+            model.eval()
+            return validate_model(model, self.cfg.val, count=self.cfg.val_count,
+                                  n_samples=self.cfg.val_samples)
 
     def finish(self, metrics: dict) -> Path:
         from ..checkpoint import save_checkpoint
@@ -262,6 +306,7 @@ class Trainer:
         self.out.mkdir(parents=True, exist_ok=True)
         tensors = {f"model.{k}": v for k, v in self.model.state_dict().items()}
         tensors.update({f"loss.{k}": v for k, v in self.losses.state_dict().items()})
+        tensors.update({f"ema.{k}": v for k, v in (self.ema or {}).items()})
         opt = self.optimizer.state_dict()
         for index, state in opt["state"].items():
             for name, value in state.items():
@@ -293,6 +338,13 @@ class Trainer:
         self.scale, self.step = info["scale"], info["step"]
         self.seconds, self.log = info["seconds"], info["log"]
         self.optimizer = self._optimizer(self.scale)
+        self.ema = self._start_ema(self.scale)
+        if self.ema is not None:
+            saved = {k[4:]: v for k, v in tensors.items() if k.startswith("ema.")}
+            if saved.keys() != self.ema.keys():
+                raise AGNDCError(f"{info_path}: the saved state has no weight average for "
+                                 "this scale (was the run started without --ema?)")
+            self.ema = {k: v.clone() for k, v in saved.items()}
         opt_state: dict = {}
         for key, value in tensors.items():
             if key.startswith("optim."):
