@@ -32,7 +32,7 @@ import torch
 from torch.overrides import TorchFunctionMode
 
 from .errors import AGNDCError, CancelledError, GridError
-from .grid import occupancy_pyramid
+from .grid import LATTICE_PAD, occupancy_pyramid
 
 #: band vs dense agreement (absolute, network output units) where the band covers the network's
 #: receptive field: float32 rounding of a different summation order only
@@ -57,7 +57,8 @@ TILE_PROGRESS_CAP = 0.97
 
 
 def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = None,
-                    progress=None, cancel=None, device=None, band_radius: int | None = None):
+                    progress=None, cancel=None, device=None, band_radius: int | None = None,
+                    canonical: bool = True):
     """Run the AGNDC cascade on a padded dual-contouring lattice (grid.py convention).
 
     Args:
@@ -72,6 +73,9 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
             on every torch call while the network runs (raises ``CancelledError``).
         device: torch device ("cpu", "cuda"); default: where the model is.
         band_radius: overrides ``model.config.band_radius`` (band mode).
+        canonical: run the network on ``trained_window`` of the lattice (the shape with the
+            empty margins voxelising gives), so the result does not depend on how much empty
+            space surrounds the shape; False runs it on the lattice as given (diagnostics).
 
     Returns:
         vertex: (Dx, Dy, Dz, 3) float32 in [0, 1], the dual vertex of the cell at each point as
@@ -81,6 +85,10 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     if mode not in MODES:
         raise AGNDCError(f"unknown inference mode {mode!r}; choose one of {', '.join(MODES)}")
     lattice = _as_lattice(lattice)
+    window = trained_window(lattice, model.levels) if canonical else None
+    if window is not None:
+        return _predict_window(model, lattice, window, mode=mode, tile=tile, progress=progress,
+                               cancel=cancel, device=device, band_radius=band_radius)
     if device is not None:
         model.to(device)
     model.eval()
@@ -104,6 +112,51 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
         edge_prob = torch.sigmoid(pred[..., 3:]).cpu().numpy()
     report(1.0, "AGNDC done")
     return np.ascontiguousarray(vertex), np.ascontiguousarray(edge_prob)
+
+
+def trained_window(lattice: np.ndarray, levels: int):
+    """Where the network should see this lattice: (start, window) or None if it already does.
+
+    Training samples are voxelised meshes, so every shape starts exactly
+    ``1 + grid.LATTICE_PAD`` points from the lattice's low end (``voxelize`` keeps one empty
+    voxel, ``pad_to_lattice`` adds one layer), and the network learned its low-end border there:
+    one more empty layer in front moves a box face by 0.25 voxel (docs/training.md). User grids
+    (binvox, .vox, arrays) come with any margin, so the occupied box is re-framed exactly as
+    ``pad_to_lattice`` frames a tight voxelisation. Only empty points are added or dropped.
+
+    Returns:
+        None when the lattice is already framed so, is empty, or has occupied border points
+        (outside it is then not known to be empty); else (start (3,) int: lattice point of the
+        window's point 0, possibly negative; window: the re-framed (X', Y', Z') bool lattice).
+    """
+    from .grid import pad_to_lattice
+
+    border = np.zeros(lattice.shape, dtype=bool)
+    border[1:-1, 1:-1, 1:-1] = True
+    if not lattice.any() or (lattice & ~border).any():
+        return None
+    occupied = np.argwhere(lattice)
+    lo, hi = occupied.min(0), occupied.max(0)
+    core = lattice[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
+    # the empty voxel voxelize keeps on every side, then the lattice padding
+    window = pad_to_lattice(np.pad(core, 1), levels)
+    start = lo - 1 - LATTICE_PAD
+    if (start == 0).all() and window.shape == lattice.shape:
+        return None
+    return start, window
+
+
+def _predict_window(model, lattice, window, **options):
+    """``predict_lattice`` on the re-framed window, written back into the lattice's points."""
+    start, sub = window
+    vertex_sub, edge_sub = predict_lattice(model, sub, canonical=False, **options)
+    # points outside the window have no crossed edge nearby: their values are never used
+    vertex = np.full(lattice.shape + (3,), 0.5, dtype=vertex_sub.dtype)
+    edge_prob = np.zeros(lattice.shape + (3,), dtype=edge_sub.dtype)
+    dst = tuple(slice(max(a, 0), min(a + n, m)) for a, n, m in zip(start, sub.shape, lattice.shape))
+    src = tuple(slice(d.start - a, d.stop - a) for d, a in zip(dst, start))
+    vertex[dst], edge_prob[dst] = vertex_sub[src], edge_sub[src]
+    return vertex, edge_prob
 
 
 def _predict_band(model, lattice: np.ndarray, radius, tile: int, report) -> torch.Tensor:

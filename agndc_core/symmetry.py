@@ -8,7 +8,10 @@ taught it; what is left is noise that shows as faces which are not flat.
 
 ``symmetry_errors`` predicts on the lattice and on its mirrored / shifted copies, maps the
 predictions back cell by cell and reports the RMS change of the surface cells' vertices in
-voxels. Measured numbers are in docs/training.md.
+voxels. ``face_phase_offsets`` says *where* a shift changes a flat face: it moves an axis-aligned
+box through every phase of the cascade's 2**levels grid and reports how far the network puts its
+two faces from surface nets' (which is exact there: the binary grid cannot say where in the
+voxel such a face lies). Measured numbers are in docs/training.md.
 """
 
 from __future__ import annotations
@@ -54,6 +57,52 @@ def symmetry_errors(predict: Predictor, lattice: np.ndarray, *, multiple: int = 
         moved = np.asarray(predict(padded), dtype=np.float64)
         errors[f"shift x by {shift}"] = _rms(base, moved[shift:shift + lattice.shape[0]], cells)
     return errors
+
+
+def face_phase_offsets(predict: Predictor, lattice: np.ndarray, axis: int = 2, *,
+                       multiple: int = 4, inset: float = 2.0) -> np.ndarray:
+    """Offsets of the two faces normal to ``axis`` at every phase of the lattice.
+
+    The lattice holds one axis-aligned box. For each shift k = 0 .. multiple - 1 it is padded by k
+    layers in front along ``axis`` (and back to a multiple behind), and the signed distance along
+    +axis of each face-interior vertex from the surface nets vertex is averaged over the face.
+
+    Args:
+        predict: the vertex predictor under test.
+        lattice: (X, Y, Z) bool lattice holding one axis-aligned box.
+        axis: the faces' normal axis.
+        multiple: side multiple the predictor needs, and the number of phases (2**levels).
+        inset: face-interior vertices lie at least this many voxels from the box's other faces.
+
+    Returns:
+        (multiple, 2) float: per shift, the mean offset (voxels, along +axis) of the low face and
+        of the high face. Zero everywhere for a predictor that respects shifts and mirrors there.
+    """
+    from .surfacenets import surface_nets_lattice
+
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.zeros((multiple, 2))
+    for shift in range(multiple):
+        pad = [(0, 0)] * 3
+        pad[axis] = (shift, -(lattice.shape[axis] + shift) % multiple)
+        padded = np.pad(lattice, pad)
+        cells = surface_cells(crossed_edges(padded))
+        reference = surface_nets_lattice(padded).astype(np.float64)
+        position = np.argwhere(cells) + reference[cells]  # (N, 3) surface nets vertices
+        interior = np.ones(len(position), dtype=bool)
+        for other in {0, 1, 2} - {axis}:
+            lo, hi = position[:, other].min(), position[:, other].max()
+            interior &= (position[:, other] > lo + inset) & (position[:, other] < hi - inset)
+        predicted = np.asarray(predict(padded), dtype=np.float64)
+        offset = predicted[cells][:, axis] - reference[cells][:, axis]
+        along = position[:, axis]
+        for side, extreme in enumerate((along.min(), along.max())):
+            face = interior & np.isclose(along, extreme)
+            if not face.any():
+                raise ValueError(f"no face-interior vertices on the {'low high'.split()[side]} "
+                                 f"face along axis {axis}: is the lattice one box?")
+            out[shift, side] = offset[face].mean()
+    return out
 
 
 def _unmirror(offsets: np.ndarray, axis: int) -> np.ndarray:

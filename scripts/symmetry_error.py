@@ -7,6 +7,10 @@ surface nets ones) at ``--res`` and prints, for surface nets and each checkpoint
 shipped AGNDC), the RMS change of the vertices in voxels when the grid is mirrored along each axis
 or shifted along x, and the RMS distance of the network's vertices from surface nets' (how much
 the network moves them at all). Surface nets is exact: its row is all zeros.
+
+With the default box, it also prints ``face_phase_offsets``: where each predictor puts the box's
+two faces normal to each axis (mean offset along +axis from surface nets, voxels) as the box is
+shifted through the 4 phases of the cascade's pooling grid.
 """
 
 import argparse
@@ -21,7 +25,7 @@ from agndc_core.inference import predict_lattice
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.pipeline import load_model
 from agndc_core.surfacenets import surface_nets_lattice
-from agndc_core.symmetry import symmetry_errors
+from agndc_core.symmetry import face_phase_offsets, symmetry_errors
 from agndc_core.voxelize import voxelize
 
 
@@ -41,7 +45,8 @@ def main() -> None:
     predictors = {"surfacenets": surface_nets_lattice}
     for path in args.checkpoint or [str(default_checkpoint_path("agndc"))]:
         model = load_model(path)
-        predictors[path] = lambda lat, model=model: predict_lattice(model, lat)[0]
+        # the raw network (canonical=False): the pipeline re-frames shifted grids, which would hide it
+        predictors[path] = lambda lat, model=model: predict_lattice(model, lat, canonical=False)[0]
     print(f"{args.mesh or 'box 1 x 0.8 x 0.6'} at {args.res}, {cells.sum()} surface cells; "
           "RMS vertex change in voxels")
     for name, predict in predictors.items():
@@ -49,6 +54,12 @@ def main() -> None:
         moved = np.sqrt(np.mean(np.sum((predict(lattice) - reference)[cells] ** 2, axis=-1)))
         print(f"{name}\n  " + "  ".join(f"{k} {v:.3f}" for k, v in errors.items())
               + f"  | moved from surface nets {moved:.3f}")
+        if args.mesh:
+            continue
+        for axis in range(3):
+            offsets = face_phase_offsets(predict, lattice, axis)
+            print(f"  {'xyz'[axis]} faces (low, high) at shift 0..3: "
+                  + "  ".join(f"({lo:+.3f}, {hi:+.3f})" for lo, hi in offsets))
 
 
 if __name__ == "__main__":

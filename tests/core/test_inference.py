@@ -7,7 +7,8 @@ import torch
 from conftest import randomise_outputs
 
 from agndc_core.errors import AGNDCError, CancelledError, GridError
-from agndc_core.inference import BAND_TOLERANCE, TILE_TOLERANCE, predict_lattice
+from agndc_core.grid import pad_to_lattice
+from agndc_core.inference import BAND_TOLERANCE, TILE_TOLERANCE, predict_lattice, trained_window
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.nn import AGNDCCascade, AGNDCConfig
 
@@ -131,3 +132,49 @@ def test_uniform_lattices_are_all_far_field(net):
             assert np.isfinite(out).all()
             np.testing.assert_array_equal(out[period:], out[:-period])
             np.testing.assert_array_equal(out[:, period:], out[:, :-period])
+
+
+def _framed_shape():
+    """A sphere fused with a box, framed exactly as voxelising frames it (pad_to_lattice of the
+    occupied voxels plus one empty voxel on every side)."""
+    shape = lattice_of((13, 11, 9), (6, 5, 4), 4, ((7, 13), (2, 6), (3, 9)))
+    occupied = np.argwhere(shape)
+    lo, hi = occupied.min(0), occupied.max(0) + 1
+    core = shape[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+    return pad_to_lattice(np.pad(core, 1))
+
+
+def test_a_voxelised_shape_is_already_in_its_trained_window():
+    lattice = _framed_shape()
+    assert trained_window(lattice, 2) is None
+    assert trained_window(np.zeros((8, 8, 8), bool), 2) is None
+    touching = lattice.copy()
+    touching[0, 5, 5] = True  # outside the lattice is then not known to be empty
+    assert trained_window(touching, 2) is None
+
+
+def test_extra_empty_margins_are_framed_away():
+    lattice = _framed_shape()
+    extra = np.pad(lattice, ((3, 5), (1, 0), (0, 7)))
+    start, window = trained_window(extra, 2)
+    np.testing.assert_array_equal(start, [3, 1, 0])
+    np.testing.assert_array_equal(window, lattice)
+
+
+def test_the_prediction_does_not_depend_on_the_empty_margins(net):
+    """The network learned shapes framed as voxelising frames them; a grid with more (or less)
+    empty space around its shape gets exactly the same vertices."""
+    lattice = _framed_shape()
+    vertex, edge = predict_lattice(net, lattice)
+    extra = np.pad(lattice, ((3, 5), (1, 0), (0, 7)))
+    inner = (slice(3, 3 + lattice.shape[0]), slice(1, 1 + lattice.shape[1]),
+             slice(0, lattice.shape[2]))
+    for ours, theirs in zip((vertex, edge), predict_lattice(net, extra)):
+        np.testing.assert_array_equal(theirs[inner], ours)
+    # less margin than voxelising leaves: the window reaches beyond the lattice
+    tight = lattice[1:, :, :]
+    cells = surface_cells(crossed_edges(tight))
+    np.testing.assert_array_equal(predict_lattice(net, tight)[0][cells], vertex[1:][cells])
+    # the raw network does see the margin (what canonical framing removes)
+    raw = predict_lattice(net, extra, canonical=False)[0][inner]
+    assert np.abs(raw - vertex)[surface_cells(crossed_edges(lattice))].max() > 1e-3

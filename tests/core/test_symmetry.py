@@ -6,7 +6,7 @@ import pytest
 
 from agndc_core.grid import pad_to_lattice
 from agndc_core.surfacenets import surface_nets_lattice
-from agndc_core.symmetry import _unmirror, symmetry_errors
+from agndc_core.symmetry import _unmirror, face_phase_offsets, symmetry_errors
 
 
 def _blob(seed=0, n=14):
@@ -61,3 +61,39 @@ def test_unmirror_twice_is_the_identity_on_all_but_the_last_cells():
 def test_lattice_sides_must_fit_the_cascade():
     with pytest.raises(ValueError, match="multiples of 4"):
         symmetry_errors(surface_nets_lattice, np.zeros((6, 8, 8), bool))
+
+
+def _box(lo=(3, 4, 5), hi=(13, 12, 15), shape=(16, 16, 20)):
+    occupancy = np.zeros(shape, dtype=bool)
+    occupancy[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+    return occupancy
+
+
+def test_surface_nets_puts_a_box_face_at_the_same_place_at_every_phase():
+    offsets = face_phase_offsets(surface_nets_lattice, _box(), axis=2)
+    assert offsets.shape == (4, 2)
+    np.testing.assert_allclose(offsets, 0.0, atol=1e-9)
+
+
+def test_a_predictor_with_a_phase_dependent_bias_is_read_face_by_face():
+    """A pull along z that depends on the cell's z index mod 4 shows up as that pull, at the
+    phase each face lands on after the shift."""
+    pull = np.array([0.2, -0.1, 0.05, 0.0])
+
+    def phased(lattice):
+        out = surface_nets_lattice(lattice).astype(np.float64)
+        out[..., 2] += pull[np.arange(lattice.shape[2]) % 4][None, None, :]
+        return out
+
+    box = _box()
+    offsets = face_phase_offsets(phased, box, axis=2)
+    # the faces' cells: between points 4|5 (low) and 14|15 (high) of the unshifted lattice
+    for shift in range(4):
+        np.testing.assert_allclose(offsets[shift], [pull[(4 + shift) % 4], pull[(14 + shift) % 4]])
+    # the other axes see no pull
+    np.testing.assert_allclose(face_phase_offsets(phased, box, axis=0), 0.0, atol=1e-9)
+
+
+def test_face_phase_offsets_refuses_a_lattice_without_faces():
+    with pytest.raises(ValueError, match="one box"):
+        face_phase_offsets(surface_nets_lattice, _blob(0), axis=2, inset=6.0)
