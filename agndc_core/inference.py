@@ -85,7 +85,7 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     if mode not in MODES:
         raise AGNDCError(f"unknown inference mode {mode!r}; choose one of {', '.join(MODES)}")
     lattice = _as_lattice(lattice)
-    window = trained_window(lattice, model.levels) if canonical else None
+    window = trained_window(lattice) if canonical else None
     if window is not None:
         return _predict_window(model, lattice, window, mode=mode, tile=tile, progress=progress,
                                cancel=cancel, device=device, band_radius=band_radius)
@@ -114,7 +114,7 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     return np.ascontiguousarray(vertex), np.ascontiguousarray(edge_prob)
 
 
-def trained_window(lattice: np.ndarray, levels: int):
+def trained_window(lattice: np.ndarray):
     """Where the network should see this lattice: (start, window) or None if it already does.
 
     Training samples are voxelised meshes, so every shape starts exactly
@@ -138,8 +138,9 @@ def trained_window(lattice: np.ndarray, levels: int):
     occupied = np.argwhere(lattice)
     lo, hi = occupied.min(0), occupied.max(0)
     core = lattice[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
-    # the empty voxel voxelize keeps on every side, then the lattice padding
-    window = pad_to_lattice(np.pad(core, 1), levels)
+    # the empty voxel voxelize keeps on every side, then the lattice padding of the training data
+    # (training/data.py frames every sample so, whatever the model's levels)
+    window = pad_to_lattice(np.pad(core, 1))
     start = lo - 1 - LATTICE_PAD
     if (start == 0).all() and window.shape == lattice.shape:
         return None

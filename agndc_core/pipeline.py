@@ -102,7 +102,8 @@ def subrange(progress, lo: float, hi: float):
 
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
            min_component_faces: int = 0, device: str = "cpu",
-           tile: int | None = None, progress=None, cancel=None, labels=None) -> RemeshResult:
+           tile: int | None = None, progress=None, cancel=None, labels=None,
+           reframe: bool = True) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
     Args:
@@ -114,6 +115,10 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         tile: lattice tile size for large grids (learned methods); None = automatic.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
         labels: ground-truth ``ScaleLabels`` list, for "oracle"/"sharp".
+        reframe: let the network see the shape framed as a voxelised mesh is (empty margins as
+            ``voxelize`` leaves them; ``inference.trained_window``), so a grid's own empty
+            margins do not change the result. ``remesh_mesh`` turns it off: its grids are
+            voxelised meshes, framed exactly as the training data were.
     """
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
@@ -137,7 +142,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         else:
             vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
                                 checkpoint, threads, device, tile,
-                                subrange(progress, 0.05, 0.9), cancel)
+                                subrange(progress, 0.05, 0.9), cancel, reframe)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
@@ -203,6 +208,9 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
                                        grid, levels=0)
         share = 0.8
     options["progress"] = subrange(progress, share, 1.0)
+    # a voxelised mesh is framed exactly as the training data were (voxelize + pad_to_lattice
+    # leave its margins, thin unvoxelised ends included): re-framing it would only add noise
+    options.setdefault("reframe", False)
     result = remesh(grid, method=method, **options)
     result.timings = {**stages.timings, **result.timings}
     result.seconds += stages.seconds
@@ -246,7 +254,8 @@ def resolution_for_voxel_size(vertices_vx3: np.ndarray, voxel_size: float, *,
     return plan_grid(extent, voxel_size=voxel_size, source=source).resolution
 
 
-def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel):
+def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel,
+             reframe=True):
     """(D, 3) vertex offsets of a learned method or the oracle/sharp (labels' vertices)."""
     if method in MESH_ONLY_METHODS:
         if labels is None:
@@ -263,7 +272,7 @@ def _predict(method, lattice, labels, checkpoint, threads, device, tile, progres
         torch.set_num_threads(int(threads))
     model = load_model(checkpoint or _default_checkpoint(method))
     vertex, _ = predict_lattice(model, lattice, device=device, tile=tile, progress=progress,
-                                cancel=cancel)
+                                cancel=cancel, canonical=reframe)
     return vertex
 
 

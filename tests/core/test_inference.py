@@ -146,17 +146,17 @@ def _framed_shape():
 
 def test_a_voxelised_shape_is_already_in_its_trained_window():
     lattice = _framed_shape()
-    assert trained_window(lattice, 2) is None
-    assert trained_window(np.zeros((8, 8, 8), bool), 2) is None
+    assert trained_window(lattice) is None
+    assert trained_window(np.zeros((8, 8, 8), bool)) is None
     touching = lattice.copy()
     touching[0, 5, 5] = True  # outside the lattice is then not known to be empty
-    assert trained_window(touching, 2) is None
+    assert trained_window(touching) is None
 
 
 def test_extra_empty_margins_are_framed_away():
     lattice = _framed_shape()
     extra = np.pad(lattice, ((3, 5), (1, 0), (0, 7)))
-    start, window = trained_window(extra, 2)
+    start, window = trained_window(extra)
     np.testing.assert_array_equal(start, [3, 1, 0])
     np.testing.assert_array_equal(window, lattice)
 
@@ -178,3 +178,20 @@ def test_the_prediction_does_not_depend_on_the_empty_margins(net):
     # the raw network does see the margin (what canonical framing removes)
     raw = predict_lattice(net, extra, canonical=False)[0][inner]
     assert np.abs(raw - vertex)[surface_cells(crossed_edges(lattice))].max() > 1e-3
+
+
+def test_remesh_of_a_grid_ignores_its_empty_margins():
+    """The same voxels with 3 more empty layers in front give the same mesh, 3 voxels along
+    (the shipped network, through pipeline.remesh; remesh_mesh's grids are voxelised already)."""
+    from agndc_core.pipeline import remesh
+
+    x, y, z = np.meshgrid(*[np.arange(14)] * 3, indexing="ij")
+    shape = ((x - 6.3) ** 2 + (y - 7.1) ** 2 + (z - 6.6) ** 2 < 25) | (
+        (x >= 3) & (x < 12) & (y >= 2) & (y < 7) & (z >= 4) & (z < 10))
+    tight = remesh(shape, method="agndc", threads=1)
+    loose = remesh(np.pad(shape, ((3, 0), (3, 0), (3, 0))), method="agndc", threads=1)
+    np.testing.assert_array_equal(loose.faces, tight.faces)
+    np.testing.assert_allclose(loose.vertices - 3.0, tight.vertices, atol=1e-5)
+    raw = remesh(np.pad(shape, ((3, 0), (3, 0), (3, 0))), method="agndc", threads=1,
+                 reframe=False)
+    assert np.abs(raw.vertices - 3.0 - tight.vertices).max() > 1e-3
