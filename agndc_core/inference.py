@@ -32,7 +32,7 @@ import torch
 from torch.overrides import TorchFunctionMode
 
 from .errors import AGNDCError, CancelledError, GridError
-from .grid import LATTICE_PAD, occupancy_pyramid
+from .grid import LATTICE_PAD, occupancy_pyramid, pad_to_lattice
 
 #: band vs dense agreement (absolute, network output units) where the band covers the network's
 #: receptive field: float32 rounding of a different summation order only
@@ -129,11 +129,8 @@ def trained_window(lattice: np.ndarray):
         (outside it is then not known to be empty); else (start (3,) int: lattice point of the
         window's point 0, possibly negative; window: the re-framed (X', Y', Z') bool lattice).
     """
-    from .grid import pad_to_lattice
-
-    border = np.zeros(lattice.shape, dtype=bool)
-    border[1:-1, 1:-1, 1:-1] = True
-    if not lattice.any() or (lattice & ~border).any():
+    on_border = any(np.take(lattice, [0, -1], axis=axis).any() for axis in range(3))
+    if on_border or not lattice.any():
         return None
     occupied = np.argwhere(lattice)
     lo, hi = occupied.min(0), occupied.max(0)

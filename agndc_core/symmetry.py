@@ -52,9 +52,7 @@ def symmetry_errors(predict: Predictor, lattice: np.ndarray, *, multiple: int = 
         mirrored = np.asarray(predict(np.flip(lattice, axis)), dtype=np.float64)
         errors[f"mirror {'xyz'[axis]}"] = _rms(base, _unmirror(mirrored, axis), cells)
     for shift in shifts:
-        padded = np.pad(lattice, [(shift, multiple - shift % multiple if shift % multiple else 0),
-                                  (0, 0), (0, 0)])
-        moved = np.asarray(predict(padded), dtype=np.float64)
+        moved = np.asarray(predict(_shifted(lattice, 0, shift, multiple)), dtype=np.float64)
         errors[f"shift x by {shift}"] = _rms(base, moved[shift:shift + lattice.shape[0]], cells)
     return errors
 
@@ -83,9 +81,7 @@ def face_phase_offsets(predict: Predictor, lattice: np.ndarray, axis: int = 2, *
     lattice = np.asarray(lattice, dtype=bool)
     out = np.zeros((multiple, 2))
     for shift in range(multiple):
-        pad = [(0, 0)] * 3
-        pad[axis] = (shift, -(lattice.shape[axis] + shift) % multiple)
-        padded = np.pad(lattice, pad)
+        padded = _shifted(lattice, axis, shift, multiple)
         cells = surface_cells(crossed_edges(padded))
         reference = surface_nets_lattice(padded).astype(np.float64)
         position = np.argwhere(cells) + reference[cells]  # (N, 3) surface nets vertices
@@ -103,6 +99,14 @@ def face_phase_offsets(predict: Predictor, lattice: np.ndarray, axis: int = 2, *
                                  f"face along axis {axis}: is the lattice one box?")
             out[shift, side] = offset[face].mean()
     return out
+
+
+def _shifted(lattice: np.ndarray, axis: int, shift: int, multiple: int) -> np.ndarray:
+    """The lattice moved ``shift`` points along ``axis`` (empty layers in front), with empty
+    layers behind to keep that side a multiple of ``multiple``."""
+    pad = [(0, 0)] * 3
+    pad[axis] = (shift, -(lattice.shape[axis] + shift) % multiple)
+    return np.pad(lattice, pad)
 
 
 def _unmirror(offsets: np.ndarray, axis: int) -> np.ndarray:
