@@ -1,29 +1,78 @@
 #!/usr/bin/env bash
-# One resumable training chunk ON THE LENT GPU MACHINE (device tool `run`, <= 10 minutes a call).
+# One call of the device tool (`run`, <= 10 minutes) on the lent GPU machine, for a training run
+# that outlives the call:
 #
-#   bash scripts/gpu_chunk.sh RUN MINUTES [extra `agndc train` options...]
+#   bash scripts/gpu_chunk.sh RUN SECONDS [extra `agndc train` options...]
 #
-# Installs the carried wheels (.whl/), regenerates the procedural data with all 16 cores (the
-# machine starts bare every call; generation is seeded, so every chunk sees the same samples),
-# resumes runs/RUN from its carried state shards, trains for MINUTES of wall time on CUDA with
-# bf16 autocast, and copies the state (shards <= 15 MiB each) and run.json to $OUT. The device
-# call names `runs/RUN` and `.whl` in `carry`; copy the returned files back into runs/RUN before
-# the next call. docs/training.md has the whole runbook.
+# The first call on a machine installs the carried wheels (.whl/), generates the procedural data
+# with all 16 cores (seeded: every machine makes the same samples; AGNDC_SAMPLES, default 5000),
+# and starts `agndc train --device cuda --resume` in its own process session, so it keeps
+# training between calls while the machine is held. Its run folder is /tmp/agndc_runs/RUN,
+# seeded from the carried runs/RUN (the state of an earlier machine) when it is new. Every call
+# then waits SECONDS (or until the trainer exits), copies run.json, the state shards (<= 15 MiB
+# each), final.* and the log to $OUT, and prints the log's tail. Later calls on the same machine
+# only wait and copy (their train options are ignored); on a fresh machine they resume. A call
+# without train options never starts a trainer; none starts once final.safetensors exists.
+# Carry `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
+# AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
 set -euo pipefail
-run=${1:?run name}; minutes=${2:?minutes of training}; shift 2
+run=${1:?run name}; seconds=${2:?seconds to wait}; shift 2
 cd "$(dirname "$0")/.."
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-    --target /tmp/site .whl/*.whl
-export PYTHONPATH="/tmp/site:$PWD" PYTHONUNBUFFERED=1
-agndc() { python3 -m agndc_core.cli "$@"; }
-data=/tmp/agndc_data
 start=$(date +%s)
-agndc train-data -o "$data/train" -n "${AGNDC_SAMPLES:-5000}" --workers 16
-agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16
-echo "data: $(( $(date +%s) - start )) s"
-agndc train --data "$data/train" --val "$data/val" -o "runs/$run" --device cuda --workers 8 \
-    --threads 4 --resume --max-minutes "$minutes" "$@"
-if [ -n "${OUT:-}" ]; then
-    cp "runs/$run"/run.json "runs/$run"/state-*.safetensors "$OUT"/
-    cp "runs/$run"/final.* "$OUT"/ 2>/dev/null || true
+# AGNDC_PYTHON: a Python that has every dependency already (a dry run here, on the CPU)
+py=${AGNDC_PYTHON:-python3}
+if [ -z "${AGNDC_PYTHON:-}" ]; then
+    [ -d /tmp/site/manifold3d ] || python3 -m pip install -q --no-index --no-deps --no-compile \
+        --no-cache-dir --upgrade --target /tmp/site .whl/*.whl
+    export PYTHONPATH="/tmp/site:$PWD"
 fi
+export PYTHONUNBUFFERED=1
+agndc() { "$py" -m agndc_core.cli "$@"; }
+data=/tmp/agndc_data
+work=/tmp/agndc_runs/$run
+pidfile=/tmp/agndc_runs/$run.pid
+mkdir -p /tmp/agndc_runs
+agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
+genpid=/tmp/agndc_runs/datagen.pid
+if [ -n "${AGNDC_SMOKE:-}" ]; then
+    # the training data is generated in the background meanwhile, for the next call
+    if ! { [ -f "$genpid" ] && kill -0 "$(cat "$genpid")" 2>/dev/null; }; then
+        setsid nohup "$py" -m agndc_core.cli train-data -o "$data/train" \
+            -n "${AGNDC_SAMPLES:-5000}" --workers 14 >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
+        echo $! >"$genpid"
+    fi
+    rm -rf /tmp/agndc_smoke
+    agndc train --data "$data/val" -o /tmp/agndc_smoke --device cuda --workers 8 --threads 4 \
+        --steps 30,10,10 "$@" 2>&1 | tr '\r' '\n' >/tmp/agndc_runs/smoke.log || true
+    grep -q "^checkpoint" /tmp/agndc_runs/smoke.log || { tail -n 30 /tmp/agndc_runs/smoke.log; exit 1; }
+    grep -E "100%.*=|^checkpoint" /tmp/agndc_runs/smoke.log
+    exit 0
+fi
+if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] \
+        && ! { [ -f "$pidfile" ] && kill -0 "$(cat "$pidfile")" 2>/dev/null; }; then
+    while [ -f "$genpid" ] && kill -0 "$(cat "$genpid")" 2>/dev/null; do sleep 2; done
+    agndc train-data -o "$data/train" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
+    echo "data ready after $(( $(date +%s) - start )) s: $(ls "$data/train" | wc -l) samples"
+    if [ ! -f "$work/run.json" ] && [ -d "runs/$run" ]; then
+        mkdir -p "$work" && cp -r "runs/$run"/. "$work"/
+    fi
+    mkdir -p "$work"
+    setsid nohup "$py" -m agndc_core.cli train --data "$data/train" --val "$data/val" \
+        -o "$work" --device cuda --workers 12 --threads 4 --resume "$@" \
+        >>"$work/train.log" 2>&1 </dev/null &
+    echo $! >"$pidfile"
+    echo "trainer started: pid $(cat "$pidfile")"
+fi
+while [ $(( $(date +%s) - start )) -lt "$seconds" ] && [ -f "$pidfile" ] \
+        && kill -0 "$(cat "$pidfile")" 2>/dev/null; do
+    sleep 5
+done
+if [ -n "${OUT:-}" ]; then
+    # run.json first: a save landing between the copies leaves weights newer than its step
+    cp "$work"/run.json "$OUT"/ 2>/dev/null || true
+    cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
+    cp "$work"/final.* "$OUT"/ 2>/dev/null || true
+fi
+{ [ -f "$pidfile" ] && kill -0 "$(cat "$pidfile")" 2>/dev/null; } && echo "trainer running" \
+    || echo "trainer not running"
+tr '\r' '\n' <"$work/train.log" | grep -v '^\s*$' | tail -n 8

@@ -115,7 +115,7 @@ def make_crop(sample: dict, grids: list[np.ndarray], s: int, size: int, origin,
 
 
 def random_crop_origin(surface, size: int, align: int, rng, margin: int = 0,
-                       dims=None) -> list[int]:
+                       dims=None, outside: bool = False) -> list[int]:
     """An aligned origin whose crop holds a random surface cell ``margin`` cells from its border.
 
     Args:
@@ -123,6 +123,10 @@ def random_crop_origin(surface, size: int, align: int, rng, margin: int = 0,
         size: crop edge; align: origins are multiples of this; margin: context wanted around
             the chosen cell (it lands in ``margin .. size - 2 - margin`` where alignment allows).
         dims: the lattice shape when ``surface`` is given as coordinates (keeps crops inside).
+        outside: let the crop reach past the lattice's ends (zero-filled by ``take``). Every
+            sample's part starts 2 points from its lattice's low end, so crops kept inside the
+            lattice show the network a crop border exactly that far from the low faces; with
+            ``outside`` the empty space in front of a face varies by whole alignment steps.
     """
     cells = np.argwhere(surface) if surface.ndim == 3 else np.asarray(surface)
     dims = surface.shape if surface.ndim == 3 else dims
@@ -133,9 +137,9 @@ def random_crop_origin(surface, size: int, align: int, rng, margin: int = 0,
     for axis, c in enumerate(int(x) for x in centre):
         # aligned starts that keep the cell inside the crop, with margin where possible
         first = -(-(c - size + 2 + margin) // align) * align
-        starts = np.arange(max(first, 0), c - margin + 1, align)
+        starts = np.arange(first if outside else max(first, 0), c - margin + 1, align)
         lo = int(rng.choice(starts)) if len(starts) else (c // align) * align
-        if dims is not None:
+        if dims is not None and not outside:
             lo = min(lo, max(dims[axis] - size, 0) // align * align)
         origin.append(lo)
     return origin

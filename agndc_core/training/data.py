@@ -98,8 +98,14 @@ def sample_mesh(sample: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def _write_one(args) -> str:
     recipe, path = args
-    if not Path(path).exists():
-        np.savez_compressed(path, **make_sample(recipe))
+    path = Path(path)
+    if not path.exists():
+        # written aside and renamed: a generator killed or running beside another never
+        # leaves a truncated sample under the name that "exists" skips
+        part = path.with_name(path.name + ".part")
+        with open(part, "wb") as f:
+            np.savez_compressed(f, **make_sample(recipe))
+        part.replace(path)
     return str(path)
 
 

@@ -70,6 +70,9 @@ class TrainConfig:
     # batch of 4 crops makes every step noisy; the average is what validation scores and what
     # the checkpoint keeps, and it is committed to the scale before finer scales train on it
     ema: float = 0.0
+    # crops may reach past the lattice's ends (``crops.random_crop_origin``): the empty space
+    # in front of a face is no longer always the same 2 points
+    outside_crops: bool = False
 
 
 class Trainer:
@@ -393,7 +396,7 @@ def make_batch(cfg: TrainConfig, model_config, samples: list[SparseSample], s: i
     for i in rng.integers(len(samples), size=cfg.batch):
         sample = samples[i]
         origin = random_crop_origin(sample.cells[s], size, align, rng, margin,
-                                    dims=sample.shapes[s])
+                                    dims=sample.shapes[s], outside=cfg.outside_crops)
         perm, flips = rng.permutation(3), rng.random(3) < 0.5
         # a dense window one alignment step larger on each side (make_crop reads one cell
         # before the crop; alignment keeps the pooled inputs on the lattice's own pyramid)

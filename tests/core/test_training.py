@@ -63,9 +63,30 @@ def test_crop_origin_is_aligned_and_contains_surface(data_dir):
         assert take(sample["surface0"], origin, (16, 16, 16)).any()
 
 
-def test_sparse_sample_windows_give_the_dense_crops(data_dir):
+def test_outside_crops_reach_past_the_lattice_and_still_hold_surface(data_dir):
+    """``outside=True``: aligned origins, each crop holds surface, and crops do reach past
+    both ends of the lattice (where the default never does)."""
+    sample = load_sample(sorted(data_dir.glob("*.npz"))[1])
+    cells, dims = np.argwhere(sample["surface0"]), sample["surface0"].shape
+    past_low = past_high = 0
+    for outside in (False, True):
+        rng = np.random.default_rng(5)
+        for _ in range(200):
+            origin = random_crop_origin(cells, 16, 8, rng, 2, dims=dims, outside=outside)
+            assert all(o % 8 == 0 for o in origin)
+            assert take(sample["surface0"], origin, (16, 16, 16)).any()
+            low = any(o < 0 for o in origin)
+            high = any(o + 16 > d for o, d in zip(origin, dims))
+            if not outside:
+                assert not low and not high
+            past_low, past_high = past_low + low, past_high + high
+    assert past_low > 0 and past_high > 0
+
+
+@pytest.mark.parametrize("outside", [False, True])
+def test_sparse_sample_windows_give_the_dense_crops(data_dir, outside):
     """The trainer's path (sparse sample -> dense window -> crop) equals cropping the dense
-    sample directly, for every scale, flip and permutation."""
+    sample directly, for every scale, flip and permutation (crops past the lattice too)."""
     levels = 2
     sample = load_sample(sorted(data_dir.glob("*.npz"))[2])
     sparse = SparseSample(sample, levels)
@@ -75,7 +96,7 @@ def test_sparse_sample_windows_give_the_dense_crops(data_dir):
         align, size = 4 * 2 ** (levels - s), 16 // 2 ** s if s < 2 else 8
         for _ in range(4):
             origin = random_crop_origin(sparse.cells[s], size, align, rng, 2,
-                                        dims=sparse.shapes[s])
+                                        dims=sparse.shapes[s], outside=outside)
             perm, flips = rng.permutation(3), rng.random(3) < 0.5
             want = make_crop(sample, grids, s, size, origin, perm, flips)
             window = sparse.window(s, np.asarray(origin) - align, [size + 2 * align] * 3)
