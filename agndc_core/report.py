@@ -236,8 +236,24 @@ def _models_table(methods) -> str:
         lines.append(f"| {method} | `{path.name}` | {described} | {meta['parameters']:,} | "
                      f"{path.stat().st_size / 2 ** 20:.2f} MiB | {steps} steps at scales {scales}, "
                      f"{data.get('samples', '?')} shapes, {training.get('train_seconds', 0) / 60:.0f}"
-                     " min CPU |")
+                     f" min on {_trained_on(training)}{_lineage_total(training)} |")
     return "\n".join(lines)
+
+
+def _trained_on(training: dict) -> str:
+    """Where the last run's steps ran: its lineage entry's or the trainer's own record, up to the
+    first comma (checkpoints from before the trainer recorded it ran on the CPU VM)."""
+    lineage = training.get("lineage") or [{}]
+    where = lineage[-1].get("hardware") or training.get("hardware") or "CPU"
+    return where.split(",")[0]
+
+
+def _lineage_total(training: dict) -> str:
+    lineage = training.get("lineage") or []
+    if len(lineage) < 2 or "total_train_seconds" not in training:
+        return ""
+    return (f" (warm-started: {len(lineage)} runs, "
+            f"{training['total_train_seconds'] / 60:.0f} min of steps in all)")
 
 
 def _torch_threads() -> int:

@@ -296,6 +296,7 @@ class Trainer:
             "config": asdict(self.cfg),
             "steps_per_scale": list(self.cfg.steps),
             "train_seconds": round(self.seconds, 1),
+            "hardware": _hardware(self.device, self.cfg),
             "final_losses": [e for e in self.log if e["step"] == self.cfg.steps[e["scale"]]],
         }
         path = save_checkpoint(self.model.eval(), self.out / "final", training=training,
@@ -357,6 +358,16 @@ class Trainer:
             self.optimizer.load_state_dict({"state": opt_state,
                                             "param_groups": info["param_groups"]})
         return True
+
+
+def _hardware(device: torch.device, cfg: TrainConfig) -> str:
+    """What the steps ran on, for the checkpoint's record (step times depend on it)."""
+    if device.type == "cuda":
+        where = f"{torch.cuda.get_device_name(device)}, bf16 autocast" if cfg.amp else \
+            torch.cuda.get_device_name(device)
+    else:
+        where = f"CPU, {cfg.threads} threads"
+    return f"{where}, torch {torch.__version__}, {cfg.workers} data workers"
 
 
 def _load_folder(folder, levels: int) -> list[SparseSample]:

@@ -115,3 +115,16 @@ def test_eval_uses_the_checkpoint_it_is_given(tmp_path, capsys):
     # only learned methods take weights: a clear error (exit status 2), not a traceback
     assert main(["eval", str(folder), "--checkpoint", "mc=x"]) == 2
     assert "--checkpoint wants" in capsys.readouterr().err
+
+
+def test_models_table_says_where_the_weights_were_trained():
+    """The training column names the last run's hardware and the lineage's total, and an old
+    record without either reads as the CPU."""
+    from agndc_core.report import _lineage_total, _trained_on
+
+    gpu = {"lineage": [{"hardware": "CPU VM"}, {"hardware": "one NVIDIA H100, bf16 autocast"}],
+           "total_train_seconds": 600.0}
+    assert _trained_on(gpu) == "one NVIDIA H100"
+    assert _lineage_total(gpu) == " (warm-started: 2 runs, 10 min of steps in all)"
+    assert _trained_on({}) == "CPU" and _lineage_total({}) == ""
+    assert _trained_on({"hardware": "CPU, 2 threads, torch 2.13"}) == "CPU"

@@ -180,6 +180,7 @@ def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_
     model, meta = load_checkpoint(path)
     assert meta["training"]["steps_per_scale"] == [200]
     assert meta["training"]["data"]["samples"] == 3
+    assert meta["training"]["hardware"].startswith("CPU, ")  # what the step times were on
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["done"]
 
