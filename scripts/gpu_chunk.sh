@@ -46,6 +46,8 @@ if [ -n "${AGNDC_SMOKE:-}" ]; then
         --steps 30,10,10 "$@" 2>&1 | tr '\r' '\n' >/tmp/agndc_runs/smoke.log || true
     grep -q "^checkpoint" /tmp/agndc_runs/smoke.log || { tail -n 30 /tmp/agndc_runs/smoke.log; exit 1; }
     grep -E "100%.*=|^checkpoint" /tmp/agndc_runs/smoke.log
+    "$py" -c "import json; t = json.load(open('/tmp/agndc_smoke/final.json'))['training']; \
+print('step time', t['train_seconds'], 's, of which waiting for batches', t['data_wait_seconds'], 's')"
     exit 0
 fi
 if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] \

@@ -105,6 +105,8 @@ class Trainer:
         self.optimizer = self._optimizer(self.scale)
         self.ema = self._start_ema(self.scale)
         self.seconds = 0.0
+        # of which waiting for the next batch: how much of a step the crop builders set
+        self.data_seconds = 0.0
 
     def _warm_start(self, path: str) -> None:
         from ..checkpoint import load_checkpoint
@@ -241,12 +243,15 @@ class Trainer:
             batches = self._batches(s, self.step, total)
             while self.step < total:
                 start = time.perf_counter()
-                window.append(self.train_step(s, self.step, next(batches)))
+                batch = next(batches)
+                self.data_seconds += time.perf_counter() - start
+                window.append(self.train_step(s, self.step, batch))
                 self.seconds += time.perf_counter() - start
                 self.step += 1
                 bar.update(1)
                 if self.step % self.cfg.log_every == 0 or self.step == total:
                     entry = {"scale": s, "step": self.step, "seconds": round(self.seconds, 1),
+                             "data_seconds": round(self.data_seconds, 1),
                              "lr": self._lr(s, self.step - 1),
                              **{k: float(np.mean([w[k] for w in window])) for k in window[0]}}
                     self.log.append(entry)
@@ -296,6 +301,7 @@ class Trainer:
             "config": asdict(self.cfg),
             "steps_per_scale": list(self.cfg.steps),
             "train_seconds": round(self.seconds, 1),
+            "data_wait_seconds": round(self.data_seconds, 1),
             "hardware": _hardware(self.device, self.cfg),
             "final_losses": [e for e in self.log if e["step"] == self.cfg.steps[e["scale"]]],
         }
@@ -321,6 +327,7 @@ class Trainer:
     def _write_run_json(self, done: bool, **extra) -> None:
         info = {"config": asdict(self.cfg), "model_config": self.model_config.to_dict(),
                 "scale": self.scale, "step": self.step, "seconds": self.seconds,
+                "data_seconds": self.data_seconds,
                 "done": done, "log": self.log, **extra}
         (self.out / "run.json").write_text(json.dumps(info, indent=1))
 
@@ -341,6 +348,7 @@ class Trainer:
                                      if k.startswith("loss.")})
         self.scale, self.step = info["scale"], info["step"]
         self.seconds, self.log = info["seconds"], info["log"]
+        self.data_seconds = info.get("data_seconds", 0.0)
         self.optimizer = self._optimizer(self.scale)
         self.ema = self._start_ema(self.scale)
         if self.ema is not None:

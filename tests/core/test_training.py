@@ -181,6 +181,8 @@ def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_
     assert meta["training"]["steps_per_scale"] == [200]
     assert meta["training"]["data"]["samples"] == 3
     assert meta["training"]["hardware"].startswith("CPU, ")  # what the step times were on
+    # the wait for batches is part of the step time, never more
+    assert 0 < meta["training"]["data_wait_seconds"] < meta["training"]["train_seconds"]
     info = json.loads((tmp_path / "run" / "run.json").read_text())
     assert info["done"]
 
