@@ -99,7 +99,7 @@ class Trainer:
             for s in range(levels + 1)]).to(self.device)
         if cfg.init:
             self._warm_start(cfg.init)
-        self.samples = _load_folder(cfg.data, levels)
+        self.samples = _load_folder(cfg.data, levels, cfg.workers)
         self.log: list[dict] = []
         self.scale, self.step = levels, 0  # next step to run
         self.optimizer = self._optimizer(self.scale)
@@ -378,13 +378,27 @@ def _hardware(device: torch.device, cfg: TrainConfig) -> str:
     return f"{where}, torch {torch.__version__}, {cfg.workers} data workers"
 
 
-def _load_folder(folder, levels: int) -> list[SparseSample]:
-    """Samples of one folder, or of several separated by commas."""
+def _load_folder(folder, levels: int, workers: int = 0) -> list[SparseSample]:
+    """Samples of one folder, or of several separated by commas, in path order; read by
+    ``workers`` processes when > 1 (5,000 samples took ~2 min in one process on the GPU
+    machine, minutes of a 30-minute lease)."""
+    from functools import partial
+
     paths = sorted(p for f in str(folder).split(",") for p in Path(f).glob("sample_*.npz"))
     if not paths:
         raise AGNDCError(f"no training samples (sample_*.npz) in {folder}; build them with "
                          "`agndc train-data`")
-    return [SparseSample(load_sample(path), levels) for path in paths]
+    read = partial(_read_sparse, levels=levels)
+    if workers <= 1 or len(paths) < 2:
+        return [read(path) for path in paths]
+    from multiprocessing import get_context
+
+    with get_context("spawn").Pool(workers) as pool:
+        return pool.map(read, paths, chunksize=8)
+
+
+def _read_sparse(path, levels: int) -> SparseSample:
+    return SparseSample(load_sample(path), levels)
 
 
 def crop_size(cfg: TrainConfig, model_config, samples: list[SparseSample], s: int) -> int:

@@ -266,6 +266,20 @@ def test_quadric_transform_keeps_the_error_measure(seed):
                                np.einsum("ni,nij,nj->n", d, full, d), rtol=1e-5)
 
 
+def test_samples_read_by_worker_processes_are_the_same(data_dir):
+    """Reading the folder with worker processes keeps the path order and every array."""
+    from agndc_core.training.train import _load_folder
+
+    serial, parallel = _load_folder(data_dir, 2), _load_folder(data_dir, 2, workers=2)
+    assert [x.recipe for x in serial] == [x.recipe for x in parallel]
+    for a, b in zip(serial, parallel):
+        np.testing.assert_array_equal(a.bits, b.bits)
+        for s in range(3):
+            np.testing.assert_array_equal(a.cells[s], b.cells[s])
+            np.testing.assert_array_equal(a.vertex[s], b.vertex[s])
+            np.testing.assert_array_equal(a.quadric[s], b.quadric[s])
+
+
 def test_worker_processes_build_the_same_batches(data_dir, tmp_path):
     """--workers only moves crop building into other processes: step k's batch is the same."""
     trainer = Trainer(_config(data_dir, tmp_path / "run"))
