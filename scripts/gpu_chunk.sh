@@ -28,6 +28,7 @@ if [ -z "${AGNDC_PYTHON:-}" ]; then
 fi
 export PYTHONUNBUFFERED=1
 agndc() { "$py" -m agndc_core.cli "$@"; }
+alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }  # the process of a pid file
 data=/tmp/agndc_data
 work=/tmp/agndc_runs/$run
 pidfile=/tmp/agndc_runs/$run.pid
@@ -36,7 +37,7 @@ agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
 if [ -n "${AGNDC_SMOKE:-}" ]; then
     # the training data is generated in the background meanwhile, for the next call
-    if ! { [ -f "$genpid" ] && kill -0 "$(cat "$genpid")" 2>/dev/null; }; then
+    if ! alive "$genpid"; then
         setsid nohup "$py" -m agndc_core.cli train-data -o "$data/train" \
             -n "${AGNDC_SAMPLES:-5000}" --workers 14 >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
         echo $! >"$genpid"
@@ -50,9 +51,8 @@ if [ -n "${AGNDC_SMOKE:-}" ]; then
 print('step time', t['train_seconds'], 's, of which waiting for batches', t['data_wait_seconds'], 's')"
     exit 0
 fi
-if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] \
-        && ! { [ -f "$pidfile" ] && kill -0 "$(cat "$pidfile")" 2>/dev/null; }; then
-    while [ -f "$genpid" ] && kill -0 "$(cat "$genpid")" 2>/dev/null; do sleep 2; done
+if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] && ! alive "$pidfile"; then
+    while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$data/train" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
     echo "data ready after $(( $(date +%s) - start )) s: $(ls "$data/train" | wc -l) samples"
     if [ ! -f "$work/run.json" ] && [ -d "runs/$run" ]; then
@@ -65,8 +65,7 @@ if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] \
     echo $! >"$pidfile"
     echo "trainer started: pid $(cat "$pidfile")"
 fi
-while [ $(( $(date +%s) - start )) -lt "$seconds" ] && [ -f "$pidfile" ] \
-        && kill -0 "$(cat "$pidfile")" 2>/dev/null; do
+while [ $(( $(date +%s) - start )) -lt "$seconds" ] && alive "$pidfile"; do
     sleep 5
 done
 if [ -n "${OUT:-}" ]; then
@@ -75,6 +74,7 @@ if [ -n "${OUT:-}" ]; then
     cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
     cp "$work"/final.* "$OUT"/ 2>/dev/null || true
 fi
-{ [ -f "$pidfile" ] && kill -0 "$(cat "$pidfile")" 2>/dev/null; } && echo "trainer running" \
-    || echo "trainer not running"
-tr '\r' '\n' <"$work/train.log" | grep -v '^\s*$' | tail -n 8
+alive "$pidfile" && echo "trainer running" || echo "trainer not running"
+# the log may not exist yet, or hold no line yet (grep then fails): neither is an error here
+[ -f "$work/train.log" ] && { tr '\r' '\n' <"$work/train.log" | grep -v '^\s*$' | tail -n 8 || true; }
+exit 0
