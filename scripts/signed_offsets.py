@@ -58,10 +58,10 @@ def on_samples(folder, methods) -> None:
     from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint
     from agndc_core.contour import dual_contour
     from agndc_core.grid import lattice_to_world
-    from agndc_core.inference import predict_lattice
     from agndc_core.labels import crossed_edges
     from agndc_core.surfacenets import surface_nets_lattice
     from agndc_core.training.data import load_sample, sample_mesh
+    from agndc_core.training.validate import reconstruct_sample
 
     models = {}
     for name in methods:
@@ -78,11 +78,13 @@ def on_samples(folder, methods) -> None:
         voxel = float(np.linalg.norm(sample["affine"][:3, 0]))
         lattice = sample["lattice"]
         for name in methods:
-            vertex = (surface_nets_lattice(lattice) if name == "surfacenets"
-                      else predict_lattice(models[name], lattice)[0])
-            vertices, _ = dual_contour(vertex, crossed_edges(lattice), lattice)
-            for kept, new in zip(found[name], offsets(lattice_to_world(vertices, sample["affine"]),
-                                                      truth, voxel)):
+            if name == "surfacenets":
+                vertices, _ = dual_contour(surface_nets_lattice(lattice),
+                                           crossed_edges(lattice), lattice)
+                vertices = lattice_to_world(vertices, sample["affine"])
+            else:  # exactly as the trainer's validation reconstructs a sample
+                vertices, _ = reconstruct_sample(models[name], sample)
+            for kept, new in zip(found[name], offsets(vertices, truth, voxel)):
                 kept.append(new)
     print(f"{folder}: {len(paths)} samples")
     for name, (aligned, other) in found.items():

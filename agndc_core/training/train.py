@@ -371,8 +371,7 @@ class Trainer:
 def _hardware(device: torch.device, cfg: TrainConfig) -> str:
     """What the steps ran on, for the checkpoint's record (step times depend on it)."""
     if device.type == "cuda":
-        where = f"{torch.cuda.get_device_name(device)}, bf16 autocast" if cfg.amp else \
-            torch.cuda.get_device_name(device)
+        where = torch.cuda.get_device_name(device) + (", bf16 autocast" if cfg.amp else "")
     else:
         where = f"CPU, {cfg.threads} threads"
     return f"{where}, torch {torch.__version__}, {cfg.workers} data workers"
