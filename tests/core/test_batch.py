@@ -5,6 +5,7 @@ what a Ctrl-C or kill leaves behind. Outputs are compared byte for byte with ``a
 import csv
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -149,7 +150,11 @@ def test_agndc_pool_equals_serial_and_single_file(mixed, tmp_path):
     pool = batch.remesh_many(inputs, tmp_path / "pool", method="agndc", workers=2)
     serial = batch.remesh_many(inputs, tmp_path / "serial", method="agndc", workers=1)
     assert [r["status"] for r in pool] == [r["status"] for r in serial] == ["ok", "ok"]
-    assert len({r["worker"] for r in pool}) == 2  # both workers did a file
+    # the pool's processes did the work, not this one; which of them took which file is the
+    # executor's choice (a worker that is ready first may take both: seen in CI)
+    here = f"{socket.gethostname()}:{os.getpid()}"
+    assert {r["worker"] for r in serial} == {here}
+    assert here not in {r["worker"] for r in pool}
     single = tmp_path / "single.ply"
     assert main(["remesh", str(inputs[0]), "-o", str(single), "--method", "agndc"]) == 0
     assert (tmp_path / "pool" / "a.ply").read_bytes() == single.read_bytes()
@@ -170,7 +175,8 @@ def test_dask_local_cluster_scheduler(mixed, reference, tmp_path):
                                                          **dict.fromkeys(BAD, "failed")}
     assert all((out / o).read_bytes() == reference[n] for n, o in GOOD.items())
     assert "truncated" in rows["broken.binvox"]["error"]
-    assert len({r["worker"] for r in rows.values()}) == 2  # the workers did the work
+    # the cluster's workers did the work (which of them took what is the scheduler's choice)
+    assert f"{socket.gethostname()}:{os.getpid()}" not in {r["worker"] for r in rows.values()}
 
 
 def test_dask_own_cluster_agndc(mixed, tmp_path):
