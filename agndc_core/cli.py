@@ -179,7 +179,7 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (evaluate_meshes, headroom_line, markdown_table, parse_methods,
+    from .evaluate import (evaluate_meshes, headroom_lines, markdown_table, parse_methods,
                            require_meshes, summarize_rows, write_report)
 
     methods = parse_methods(args.methods)
@@ -195,9 +195,8 @@ def _cmd_eval(args) -> int:
     written = write_report(rows, args.out)
     summaries = summarize_rows(rows)
     print(markdown_table(summaries))
-    headroom = headroom_line(summaries)  # "" unless both mc and oracle were evaluated
-    if headroom:
-        print(headroom)
+    for line in headroom_lines(summaries):  # none unless mc and a ceiling were evaluated
+        print(line)
     print("written: " + ", ".join(str(p) for p in written.values()))
     return 1 if any(r["error"] for r in rows) else 0
 

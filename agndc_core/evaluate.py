@@ -21,6 +21,8 @@ METRIC_COLUMNS = ("cd", "f1", "nc", "ecd", "ef1")
 HEADERS = {"cd": "CD×10⁵ ↓", "f1": "F1 ↑", "nc": "NC ↑", "ecd": "ECD×10² ↓", "ef1": "EF1 ↑"}
 #: metrics of the "share of the MC→oracle headroom" line (``headroom_shares``)
 HEADROOM_COLUMNS = ("cd", "ef1")
+#: the ceilings the headroom lines measure against (``headroom_lines``)
+HEADROOM_CEILINGS = ("oracle", "oracle_binary")
 #: MANIFEST.csv "kind" -> report category
 CATEGORIES = {"cad": "CAD", "organic": "organic", "print (Thingi10K)": "Thingi10K"}
 
@@ -129,37 +131,40 @@ def markdown_table(summaries, first="method") -> str:
     return "\n".join(lines)
 
 
-def headroom_shares(summaries, columns=HEADROOM_COLUMNS) -> dict[str, dict[str, float]]:
-    """Each method's share of the gap between marching cubes and the oracle, in percent.
+def headroom_shares(summaries, columns=HEADROOM_COLUMNS,
+                    ceiling: str = "oracle") -> dict[str, dict[str, float]]:
+    """Each method's share of the gap between marching cubes and ``ceiling``, in percent.
 
     For a lower-is-better metric (CD) the share is ``(m_mc - m) / (m_mc - m_oracle)``, for a
     higher-is-better one (EF1) ``(m - m_mc) / (m_oracle - m_mc)``: 0 % is marching cubes, 100 %
-    the oracle, and a negative share is worse than marching cubes. Computed from the means in
-    ``summaries`` (``summarize_rows``); empty when mc or oracle is missing, NaN where the gap is
-    zero or a mean is missing.
+    the ceiling method ("oracle", or "oracle_binary": what binary input can reach), and a
+    negative share is worse than marching cubes. Computed from the means in ``summaries``
+    (``summarize_rows``); empty when mc or the ceiling is missing, NaN where the gap is zero or
+    a mean is missing.
 
     Returns:
         {method: {column: percent}} for every summarised method, in the summaries' order.
     """
     by_method = {s["method"]: s for s in summaries}
-    if "mc" not in by_method or "oracle" not in by_method:
+    if "mc" not in by_method or ceiling not in by_method:
         return {}
     shares = {}
     for method, summary in by_method.items():
         shares[method] = {}
         for column in columns:
-            base, ceiling, value = (by_method["mc"][column], by_method["oracle"][column],
-                                    summary[column])
-            gap = ceiling - base  # the sign cancels: (value - base) / gap for either direction
-            ok = all(math.isfinite(v) for v in (base, ceiling, value)) and gap != 0
+            base, top, value = (by_method["mc"][column], by_method[ceiling][column],
+                                summary[column])
+            gap = top - base  # the sign cancels: (value - base) / gap for either direction
+            ok = all(math.isfinite(v) for v in (base, top, value)) and gap != 0
             # + 0.0: mc's own share is 0 / negative gap = -0.0, shown as "0.0"
             shares[method][column] = 100.0 * (value - base) / gap + 0.0 if ok else math.nan
     return shares
 
 
-def headroom_line(summaries, columns=HEADROOM_COLUMNS) -> str:
-    """One markdown line: "Share of the MC→oracle headroom ..." per metric; "" without mc/oracle."""
-    shares = headroom_shares(summaries, columns)
+def headroom_line(summaries, columns=HEADROOM_COLUMNS, ceiling: str = "oracle") -> str:
+    """One markdown line: "Share of the MC→ceiling headroom ..." per metric; "" without mc or
+    the ceiling."""
+    shares = headroom_shares(summaries, columns, ceiling)
     if not shares:
         return ""
     parts = []
@@ -167,9 +172,16 @@ def headroom_line(summaries, columns=HEADROOM_COLUMNS) -> str:
         cells = [f"{method} {'–' if math.isnan(s[column]) else f'{s[column]:.1f} %'}"
                  for method, s in shares.items()]
         parts.append(f"{column.upper()}: " + ", ".join(cells))
-    return ("Share of the MC→oracle headroom (0 % = mc, 100 % = oracle, from the means above; "
-            "(mc − method) / (mc − oracle) for CD, (method − mc) / (oracle − mc) for EF1): "
-            + "; ".join(parts) + ".")
+    return (f"Share of the MC→{ceiling} headroom (0 % = mc, 100 % = {ceiling}, from the means "
+            f"above; (mc − method) / (mc − {ceiling}) for CD, (method − mc) / ({ceiling} − mc) "
+            "for EF1): " + "; ".join(parts) + ".")
+
+
+def headroom_lines(summaries, columns=HEADROOM_COLUMNS) -> list[str]:
+    """The headroom line against each ceiling that was evaluated: the oracle (this
+    contouring's ceiling) and oracle_binary (approximately what binary input can reach)."""
+    lines = [headroom_line(summaries, columns, ceiling) for ceiling in HEADROOM_CEILINGS]
+    return [line for line in lines if line]
 
 
 def write_report(rows, out_dir: Path) -> dict[str, Path]:

@@ -52,6 +52,31 @@ class ScaleLabels:
     quadric: np.ndarray | None = None  # (D, 6) float32 mean n n^T (xx, yy, zz, xy, yz, zx)
 
 
+def binary_oracle_vertex(labels: ScaleLabels, midpoints: np.ndarray) -> np.ndarray:
+    """The oracle's vertices with what a binary grid cannot tell put back.
+
+    A face that is exactly axis-aligned leaves the same voxels wherever it lies within its layer
+    of cells, so no method that sees only the grid can know its depth: the estimate with the
+    least error is the layer's midpoint, which is what surface nets gives along that axis. Cells
+    on such faces (``tol.axis_aligned``) take ``midpoints``' coordinate along the face normal and
+    keep the ground truth in the plane; every other cell keeps the ground truth. Contoured, this
+    is an approximate ceiling for binary input: context can sometimes say more (the fixed frame
+    ``voxelize`` puts around a mesh places its bounding box's low faces; a neighbouring slanted
+    face's staircase places the edge it shares), so a method may beat it on some shapes.
+
+    Args:
+        labels: finest-scale labels with ``quadric``; midpoints: (D, 3) surface nets offsets of
+            the same lattice (``surfacenets.surface_nets_lattice``).
+
+    Returns:
+        (D, 3) float32 offsets in [0, 1].
+    """
+    if labels.quadric is None:
+        raise ValueError("binary_oracle_vertex needs labels with normal quadrics")
+    axis_aligned = labels.quadric[..., :3] > tol.axis_aligned  # (D, 3): face normal along axis
+    return np.where(axis_aligned, midpoints, labels.vertex).astype(np.float32)
+
+
 def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[ScaleLabels]:
     """Labels of scales 0..levels for a mesh voxelised into ``grid``.
 

@@ -12,6 +12,9 @@ Methods:
              steps, default lambda/nu), smoothed in lattice coordinates;
     "oracle" dual contouring of ground-truth labels: needs the source mesh (``remesh_mesh``);
              the ceiling any network can reach with this contouring.
+    "oracle_binary" the oracle with what a binary grid cannot tell put back: on exactly
+             axis-aligned faces the vertex sits at its layer's midpoint along the normal
+             (``labels.binary_oracle_vertex``): an approximate ceiling for binary input.
     "sharp"  the same computation offered to users as a remesher for mesh input ("exact dual
              contouring"): each dual vertex minimises the quadratic error of the source mesh's
              own tangent planes inside its cell (a QEF, ``labels.py``), so flat faces stay flat
@@ -43,9 +46,9 @@ from .errors import AGNDCError, CancelledError, MeshError
 from .grid import VoxelGrid, lattice_to_world, pad_to_lattice
 from .labels import crossed_edges
 
-METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "sharp")
+METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "oracle_binary", "sharp")
 #: methods that contour the source mesh's own intersections: mesh input only
-MESH_ONLY_METHODS = ("oracle", "sharp")
+MESH_ONLY_METHODS = ("oracle", "oracle_binary", "sharp")
 #: default checkpoint name per learned method (agndc_core/weights/<name>.safetensors)
 CHECKPOINT_NAMES = {"agndc": "agndc", "undc": "undc"}
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
@@ -108,13 +111,13 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
 
     Args:
         grid: the input; a plain (X, Y, Z) array is accepted and placed at unit voxel size.
-        method: one of METHODS. "oracle"/"sharp" need ``labels`` (use ``remesh_mesh``).
+        method: one of METHODS. MESH_ONLY_METHODS need ``labels`` (use ``remesh_mesh``).
         checkpoint: path of a .safetensors checkpoint (learned methods); default: shipped weights.
         threads: torch CPU threads (default: torch's choice).
         min_component_faces: drop connected components smaller than this.
         tile: lattice tile size for large grids (learned methods); None = automatic.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
-        labels: ground-truth ``ScaleLabels`` list, for "oracle"/"sharp".
+        labels: ground-truth ``ScaleLabels`` list, for MESH_ONLY_METHODS.
         reframe: let the network see the shape framed as a voxelised mesh is (empty margins as
             ``voxelize`` leaves them; ``inference.trained_window``), so a grid's own empty
             margins do not change the result. ``remesh_mesh`` turns it off: its grids are
@@ -189,9 +192,9 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
                 source: str = "mesh", **options) -> RemeshResult:
     """Voxelise a mesh (in its own coordinates) at ``resolution`` and ``remesh`` the grid.
 
-    For ``method="oracle"`` or ``"sharp"`` the ground-truth labels of the mesh (its exact
-    intersections and normals) are contoured instead of a network's predictions. Other keyword
-    options are passed to ``remesh``.
+    For ``MESH_ONLY_METHODS`` ("oracle", "oracle_binary", "sharp") the ground-truth labels of
+    the mesh (its exact intersections and normals) are contoured instead of a network's
+    predictions. Other keyword options are passed to ``remesh``.
     """
     from .voxelize import voxelize
 
@@ -256,13 +259,18 @@ def resolution_for_voxel_size(vertices_vx3: np.ndarray, voxel_size: float, *,
 
 def _predict(method, lattice, labels, checkpoint, threads, device, tile, progress, cancel,
              reframe=True):
-    """(D, 3) vertex offsets of a learned method or the oracle/sharp (labels' vertices)."""
+    """(D, 3) vertex offsets of a learned method or a mesh-only method (the labels' vertices)."""
     if method in MESH_ONLY_METHODS:
         if labels is None:
             raise AGNDCError(f"method {method!r} contours the source mesh's own surface: it "
                              "needs a mesh as input (remesh_mesh), not a voxel grid alone")
         if labels[0].inside.shape != lattice.shape:
             raise MeshError("oracle labels do not match the grid's lattice")
+        if method == "oracle_binary":
+            from .labels import binary_oracle_vertex
+            from .surfacenets import surface_nets_lattice
+
+            return binary_oracle_vertex(labels[0], surface_nets_lattice(lattice))
         return labels[0].vertex
     import torch
 

@@ -15,6 +15,10 @@ class Tolerances:
     qef_singular: float = 0.05
     # a cell counts as "containing" a sample if it is inside the cell dilated by this (grid units)
     cell_slack: float = 1e-9
+    # a cell lies on an axis-aligned face when the mean squared normal component along one axis
+    # (its quadric's diagonal) exceeds this: the normal is within 0.6 deg of the axis, so the
+    # face crosses no voxel layer over ~100 voxels and the binary grid cannot place it in depth
+    axis_aligned: float = 0.9999
 
 
 tol = Tolerances()

@@ -134,3 +134,49 @@ def test_sharp_mode_is_the_oracle_for_users():
     assert sharp.method == "sharp"
     with pytest.raises(AGNDCError, match="needs a mesh"):
         remesh(sharp.grid, method="sharp")
+
+
+
+TREAD = 0.0697  # height of the step's tread: 0.3 voxel from its layer's middle at RES
+
+
+def stepped_block() -> trimesh.Trimesh:
+    """A block with a step on top: the step's tread (z = TREAD) is an axis-aligned face inside
+    the bounding box, so the frame ``voxelize`` puts around the mesh does not place it."""
+    from manifold3d import Manifold
+
+    base = Manifold.cube([0.8, 0.8, 0.4]).translate([0.0, 0.0, TREAD - 0.4])
+    riser = Manifold.cube([0.4, 0.8, 0.3]).translate([0.0, 0.0, 0.0])
+    mesh = (base + riser).to_mesh()
+    return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts))
+
+
+def test_binary_oracle_takes_the_midpoint_depth_of_axis_aligned_faces_only():
+    """oracle_binary = the oracle, except that cells on exactly axis-aligned faces sit at surface
+    nets' depth along the face normal (what a binary grid cannot tell); in the face's plane and
+    on slanted faces it is the oracle."""
+    def run(mesh, method):
+        return remesh_mesh(mesh.vertices, mesh.faces, resolution=RES, method=method)
+
+    step = stepped_block()
+    assert step.is_watertight
+    oracle, binary, nets = (run(step, m) for m in ("oracle", "oracle_binary", "surfacenets"))
+    np.testing.assert_array_equal(binary.faces, oracle.faces)  # the input gives the topology
+    voxel = oracle.grid.voxel_size[0]
+    # vertices of the tread's interior: on z = TREAD, over 1.5 voxels from its edges
+    tread = ((np.abs(oracle.vertices[:, 2] - TREAD) < 1e-4)
+             & (oracle.vertices[:, 0] > 0.4 + 1.5 * voxel)
+             & (oracle.vertices[:, 0] < 0.8 - 1.5 * voxel)
+             & (np.abs(oracle.vertices[:, 1] - 0.4) < 0.4 - 1.5 * voxel))
+    assert tread.sum() > 50
+    # along the normal: surface nets' depth, off the true plane (the oracle's) by the same
+    # amount everywhere: the tread's depth within its layer of voxels
+    np.testing.assert_allclose(binary.vertices[tread, 2], nets.vertices[tread, 2], atol=1e-6)
+    miss = binary.vertices[tread, 2] - TREAD
+    assert 0.05 * voxel < abs(miss[0]) <= 0.5 * voxel and np.ptp(miss) < 1e-6
+    # in the plane, and everywhere off the axis-aligned faces' interiors: the oracle
+    np.testing.assert_allclose(binary.vertices[tread, :2], oracle.vertices[tread, :2], atol=1e-6)
+    # no face of a rotated cube is axis-aligned: the binary oracle is the oracle
+    turned = SHAPES["rotated_cube"]()
+    np.testing.assert_allclose(run(turned, "oracle_binary").vertices,
+                               run(turned, "oracle").vertices)

@@ -7,7 +7,7 @@ import numpy as np
 import trimesh
 
 from agndc_core.checkpoint import default_checkpoint_path
-from agndc_core.evaluate import headroom_line, headroom_shares
+from agndc_core.evaluate import headroom_line, headroom_lines, headroom_shares
 from agndc_core.grid import VoxelGrid
 from agndc_core.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 
@@ -46,6 +46,15 @@ def test_headroom_shares_from_the_means():
     assert "EF1: mc 0.0 %, a 30.0 %, b -20.0 %, c 0.0 %, oracle 100.0 %" in line
     # without both anchors there is nothing to share
     assert headroom_shares(summaries[:-1]) == {} and headroom_line(summaries[1:]) == ""
+    # against the binary-input ceiling: the same shares of a smaller gap
+    binary = summaries + [summary("oracle_binary", 6.0, 0.45)]
+    shares = headroom_shares(binary, ceiling="oracle_binary")
+    assert shares["a"]["cd"] == 100.0 and np.isclose(shares["a"]["ef1"], 60.0)
+    assert np.isclose(shares["oracle"]["cd"], 200.0)
+    lines = headroom_lines(binary)
+    assert [line.split(" headroom")[0] for line in lines] == [
+        "Share of the MC→oracle", "Share of the MC→oracle_binary"]
+    assert headroom_lines(summaries) == [headroom_line(summaries)]
 
 
 def test_rotated_box_is_a_closed_turned_box():
@@ -71,11 +80,14 @@ def test_report_on_a_small_folder(tmp_path):
         assert f"| {method} | 2 |" in text
     assert "AGNDC against mc: CD " in text and "AGNDC against undc: CD " in text
     assert "AGNDC against surfacenets: CD " in text
-    headroom = [line for line in text.splitlines() if line.startswith("Share of the MC→oracle")]
-    assert len(headroom) == 1  # one resolution
-    for method in REPORT_METHODS:
-        assert f" {method} " in headroom[0]
-    assert "CD: mc 0.0 %" in headroom[0] and "; EF1: mc " in headroom[0]
+    for ceiling in ("oracle", "oracle_binary"):
+        headroom = [line for line in text.splitlines()
+                    if line.startswith(f"Share of the MC→{ceiling} headroom")]
+        assert len(headroom) == 1  # one resolution
+        for method in REPORT_METHODS:
+            assert f" {method} " in headroom[0]
+        assert "CD: mc 0.0 %" in headroom[0] and "; EF1: mc " in headroom[0]
+        assert f"{ceiling} 100.0 %" in headroom[0]
     # an "ablation" that is the shipped checkpoint itself reproduces the agndc line exactly
     ablation = text.split("## Ablation")[1].split("\n\n")[1].splitlines()
     lines = {line.split(" | ")[0].strip("| "): line.split(" | ")[-5:] for line in ablation[2:]}
