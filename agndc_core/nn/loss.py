@@ -9,10 +9,6 @@
   mesh, and little along it, where the target is only the centroid of the cell's patch, a
   position binary input barely determines (on the dev parts it is ~2/3 of the plain MSE of
   surface nets).
-  ``sharp_weight`` w > 1 counts the error of *sharp* cells (``sharp_cells``: creases, corners,
-  tight curvature; 16 % of the dev meshes' surface cells at 64³) w times, the weights
-  normalised: with the ground truth put into those cells alone, AGNDC's CD on the dev meshes
-  falls by half of its gap to the binary-input ceiling and EF1 nearly doubles (docs/training.md).
 * L_E: binary cross-entropy with logits of the 3 edge channels, averaged over the valid points
   (all of them unless a ``valid`` mask says which points have their whole receptive field in
   real data). Where the edges come from the input (the finest scale with input topology) there
@@ -40,27 +36,10 @@ from ..errors import ModelError
 QUADRIC_FLOOR = 0.1
 
 
-def sharp_cells(quadric: torch.Tensor) -> torch.Tensor:
-    """(..., 6) normal quadrics -> (...) bool: the cell's normals span more than one direction.
-
-    True where the quadric's second eigenvalue exceeds ``tol.qef_singular`` of its largest, the
-    threshold above which the labels' QEF solves for more than a plane (``labels._solve_qef``):
-    the cell holds a crease, a corner or curvature too tight to be one plane. Empty cells
-    (all-zero quadric) are not sharp.
-    """
-    from ..tolerances import tol
-
-    xx, yy, zz, xy, yz, zx = quadric.float().unbind(-1)
-    matrix = torch.stack([torch.stack([xx, xy, zx], -1), torch.stack([xy, yy, yz], -1),
-                          torch.stack([zx, yz, zz], -1)], -2)  # (..., 3, 3)
-    eigen = torch.linalg.eigvalsh(matrix)  # (..., 3) ascending
-    return eigen[..., 1] > tol.qef_singular * eigen[..., 2].clamp_min(1e-12)
-
-
 def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Tensor,
                        surface: torch.Tensor, valid: torch.Tensor | None = None,
                        quadric: torch.Tensor | None = None,
-                       quadric_floor: float = QUADRIC_FLOOR, sharp_weight: float = 1.0
+                       quadric_floor: float = QUADRIC_FLOOR
                        ) -> tuple[torch.Tensor, torch.Tensor]:
     """(L_V, L_E) of one scale.
 
@@ -72,7 +51,6 @@ def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Ten
         valid: optional (B, X, Y, Z) bool, points whose edges are scored (default: all).
         quadric: optional (B, X, Y, Z, 6) float normal quadrics (xx, yy, zz, xy, yz, zx).
         quadric_floor: weight of the plain squared distance added to the quadric term.
-        sharp_weight: weight of the sharp cells' vertex error (needs ``quadric``); 1 = off.
 
     Returns:
         two scalar tensors.
@@ -87,10 +65,6 @@ def vertex_edge_losses(pred: torch.Tensor, vertex: torch.Tensor, edge: torch.Ten
     # (B, X, Y, Z, 6)
     pred = pred.permute(0, 2, 3, 4, 1)
     mask = surface.float()
-    if sharp_weight != 1.0:
-        if quadric is None:
-            raise ModelError("loss: sharp_weight needs the cells' normal quadrics")
-        mask = mask * torch.where(sharp_cells(quadric), sharp_weight, 1.0)
     d = pred[..., :3].float() - vertex.float()
     if quadric is None:
         squared = (d**2).sum(-1)
@@ -115,15 +89,12 @@ class AGNDCLoss(nn.Module):
     """``L_V + exp(-t) L_E + t`` with learnable ``t`` (module docstring)."""
 
     def __init__(self, init_lambda: float = 1.0, train_edges: bool = True,
-                 quadric_floor: float = QUADRIC_FLOOR, sharp_weight: float = 1.0):
+                 quadric_floor: float = QUADRIC_FLOOR):
         super().__init__()
         self.train_edges = train_edges
         if not quadric_floor >= 0:
             raise ModelError(f"quadric_floor must be >= 0, got {quadric_floor}")
-        if not sharp_weight > 0:
-            raise ModelError(f"sharp_weight must be > 0, got {sharp_weight}")
         self.quadric_floor = float(quadric_floor)
-        self.sharp_weight = float(sharp_weight)
         if not init_lambda > 0:
             raise ModelError(f"init_lambda must be > 0, got {init_lambda}")
         self.t = nn.Parameter(torch.tensor(-math.log(init_lambda)))
@@ -137,7 +108,7 @@ class AGNDCLoss(nn.Module):
                 ) -> tuple[torch.Tensor, dict]:
         """Total loss and its parts ({"vertex", "edge", "lambda"}, detached floats)."""
         loss_v, loss_e = vertex_edge_losses(pred, vertex, edge, surface, valid, quadric,
-                                            self.quadric_floor, self.sharp_weight)
+                                            self.quadric_floor)
         parts = {"vertex": float(loss_v.detach()), "edge": float(loss_e.detach()),
                  "lambda": float(self.weight.detach()) if self.train_edges else 0.0}
         if not self.train_edges:

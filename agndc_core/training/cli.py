@@ -40,8 +40,6 @@ def add_train_parser(sub) -> None:
     p.add_argument("--ema", type=float, default=0.0, help="decay of a moving average of the "
                    "weights that validation scores and the checkpoint keeps, e.g. 0.99 "
                    "(default 0: off)")
-    p.add_argument("--sharp-weight", type=float, default=1.0, help="weight of the vertex "
-                   "error of sharp cells (creases, corners), e.g. 4 (default 1: all alike)")
     p.add_argument("--outside-crops", action="store_true", help="let crops reach past the "
                    "lattice's ends, so the empty space in front of a face varies")
     p.add_argument("--batch", type=int, default=4)
@@ -84,8 +82,7 @@ def _cmd_train(args) -> int:
                       margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
                       workers=args.workers, init=args.init, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
-                      ema=args.ema, outside_crops=args.outside_crops,
-                      sharp_weight=args.sharp_weight)
+                      ema=args.ema, outside_crops=args.outside_crops)
     if args.quadric_floor is not None:
         cfg.quadric_floor = args.quadric_floor
     path = train(cfg, resume=args.resume)

@@ -73,9 +73,6 @@ class TrainConfig:
     # crops may reach past the lattice's ends (``crops.random_crop_origin``): the empty space
     # in front of a face is no longer always the same 2 points
     outside_crops: bool = False
-    # the vertex error of sharp cells (creases, corners: ``nn.loss.sharp_cells``) counts this
-    # many times; 1 = every surface cell alike
-    sharp_weight: float = 1.0
 
 
 class Trainer:
@@ -98,8 +95,7 @@ class Trainer:
         # the finest scale's edges are the input's crossing parity (inference always contours
         # the input's topology): no edge loss there, its gradient would train a dead head
         self.losses = torch.nn.ModuleList([
-            AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor,
-                      sharp_weight=cfg.sharp_weight)
+            AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor)
             for s in range(levels + 1)]).to(self.device)
         if cfg.init:
             self._warm_start(cfg.init)

@@ -10,7 +10,6 @@ from agndc_core.errors import ModelError
 from agndc_core.inference import BAND_TOLERANCE
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.nn import AGNDCCascade, AGNDCConfig, AGNDCLoss, undc_baseline
-from agndc_core.nn.loss import sharp_cells
 
 
 def blob_lattice(shape=(32, 32, 24)) -> np.ndarray:
@@ -126,45 +125,6 @@ def test_quadric_floor_adds_the_plain_squared_error():
         assert float(v_across) == pytest.approx((1 + floor) * 0.09)
     with pytest.raises(ModelError, match="quadric_floor"):
         AGNDCLoss(quadric_floor=-1.0)
-
-
-def quadric_of(*normals):
-    """(6,) mean n n^T (xx, yy, zz, xy, yz, zx) of unit normals."""
-    n = torch.nn.functional.normalize(torch.tensor(normals, dtype=torch.float32), dim=-1)
-    q = (n[:, :, None] * n[:, None, :]).mean(0)
-    return torch.stack([q[0, 0], q[1, 1], q[2, 2], q[0, 1], q[1, 2], q[2, 0]])
-
-
-def test_sharp_cells_are_creases_and_corners_not_planes():
-    flat = quadric_of([0.3, 0.5, 0.8])
-    slight = quadric_of([0, 0, 1], [0.1, 0, 1])  # 6 deg apart: one plane to the QEF
-    crease = quadric_of([1, 0, 0], [0, 1, 0])
-    corner = quadric_of([1, 0, 0], [0, 1, 0], [0, 0, 1])
-    empty = torch.zeros(6)
-    got = sharp_cells(torch.stack([flat, slight, crease, corner, empty]))
-    assert got.tolist() == [False, False, True, True, False]
-
-
-def test_sharp_weight_counts_sharp_cells_more():
-    """Two surface cells with the same error across their surface, one flat and one a crease:
-    weight w makes the vertex loss the weighted mean (1 * e + w * e') / (1 + w)."""
-    pred = torch.zeros(1, 6, 2, 1, 1)
-    vertex = torch.zeros(1, 2, 1, 1, 3)
-    vertex[0, 0, 0, 0] = torch.tensor([0.0, 0.0, 0.2])  # flat cell: 0.2 across its plane z
-    vertex[0, 1, 0, 0] = torch.tensor([0.4, 0.4, 0.0])  # crease of planes x and y
-    surface = torch.ones(1, 2, 1, 1, dtype=torch.bool)
-    edge = torch.zeros(1, 2, 1, 1, 3)
-    quadric = torch.stack([quadric_of([0, 0, 1]), quadric_of([1, 0, 0], [0, 1, 0])])
-    quadric = quadric.reshape(1, 2, 1, 1, 6)
-    flat_error, crease_error = 0.04, 0.5 * (0.16 + 0.16)  # d^T Q d of each cell (floor 0)
-    for weight in (1.0, 4.0):
-        loss = AGNDCLoss(train_edges=False, quadric_floor=0.0, sharp_weight=weight)
-        v, _ = loss(pred, vertex, edge, surface, quadric=quadric)
-        assert float(v) == pytest.approx((flat_error + weight * crease_error) / (1 + weight))
-    with pytest.raises(ModelError, match="sharp_weight"):
-        AGNDCLoss(sharp_weight=0.0)
-    with pytest.raises(ModelError, match="quadrics"):
-        AGNDCLoss(sharp_weight=2.0)(pred, vertex, edge, surface)
 
 
 # ---------------------------------------------------------------------- band evaluation
