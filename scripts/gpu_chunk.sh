@@ -15,6 +15,8 @@
 # without train options never starts a trainer; none starts once final.safetensors exists.
 # Carry `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
 # AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
+# AGNDC_RESOLUTIONS=LO,HI: the training shapes' voxels on their longest side (default 32,128);
+# each range has its own data folder. The held-out samples stay 32-128 (comparable runs).
 set -euo pipefail
 run=${1:?run name}; seconds=${2:?seconds to wait}; shift 2
 cd "$(dirname "$0")/.."
@@ -30,6 +32,8 @@ export PYTHONUNBUFFERED=1
 agndc() { "$py" -m agndc_core.cli "$@"; }
 alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }  # the process of a pid file
 data=/tmp/agndc_data
+resolutions=${AGNDC_RESOLUTIONS:-32,128}
+train="$data/train_${resolutions/,/-}"
 work=/tmp/agndc_runs/$run
 pidfile=/tmp/agndc_runs/$run.pid
 mkdir -p /tmp/agndc_runs
@@ -38,7 +42,7 @@ genpid=/tmp/agndc_runs/datagen.pid
 if [ -n "${AGNDC_SMOKE:-}" ]; then
     # the training data is generated in the background meanwhile, for the next call
     if ! alive "$genpid"; then
-        setsid nohup "$py" -m agndc_core.cli train-data -o "$data/train" \
+        setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
             -n "${AGNDC_SAMPLES:-5000}" --workers 14 >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
         echo $! >"$genpid"
     fi
@@ -53,13 +57,14 @@ print('step time', t['train_seconds'], 's, of which waiting for batches', t['dat
 fi
 if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] && ! alive "$pidfile"; then
     while alive "$genpid"; do sleep 2; done
-    agndc train-data -o "$data/train" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
-    echo "data ready after $(( $(date +%s) - start )) s: $(ls "$data/train" | wc -l) samples"
+    agndc train-data -o "$train" --resolutions "$resolutions" -n "${AGNDC_SAMPLES:-5000}" \
+        --workers 16 2>/dev/null
+    echo "data ready after $(( $(date +%s) - start )) s: $(ls "$train" | wc -l) samples"
     if [ ! -f "$work/run.json" ] && [ -d "runs/$run" ]; then
         mkdir -p "$work" && cp -r "runs/$run"/. "$work"/
     fi
     mkdir -p "$work"
-    setsid nohup "$py" -m agndc_core.cli train --data "$data/train" --val "$data/val" \
+    setsid nohup "$py" -m agndc_core.cli train --data "$train" --val "$data/val" \
         -o "$work" --device cuda --workers 12 --threads 4 --resume "$@" \
         >>"$work/train.log" 2>&1 </dev/null &
     echo $! >"$pidfile"

@@ -14,6 +14,8 @@ def add_train_parser(sub) -> None:
     p.add_argument("-n", "--count", type=int, default=480)
     p.add_argument("--seed0", type=int, default=0, help="first shape seed (val: use another range)")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--resolutions", default="32,128", help="LO,HI voxels on a shape's longest "
+                   "side, drawn log-uniform (default 32,128)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("train", help="train the AGNDC cascade (or the UNDC baseline) per scale")
@@ -59,7 +61,13 @@ def _ints(text: str) -> list[int]:
 def _cmd_data(args) -> int:
     from .data import build_dataset
 
-    paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers)
+    from ..errors import AGNDCError
+
+    bounds = _ints(args.resolutions)
+    if len(bounds) != 2:
+        raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
+    paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
+                          resolution_range=bounds)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

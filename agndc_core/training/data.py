@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import AGNDCError
 from ..grid import pad_to_lattice
 from ..labels import make_labels
 from ..shapes import generate_shape, is_axis_aligned, shape_family
@@ -109,15 +110,24 @@ def _write_one(args) -> str:
     return str(path)
 
 
-def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True) -> list[Path]:
-    """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept."""
+def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
+                  resolution_range=RESOLUTION_RANGE) -> list[Path]:
+    """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
+    (so a folder holds one resolution range: use a new folder for another).
+
+    ``resolution_range`` (lo, hi): voxels on the longest side, log-uniform. The default stops at
+    128; dev meshes at 128³ suggest larger shapes are needed there (docs/training.md).
+    """
     from multiprocessing import get_context
 
     from tqdm import tqdm
 
+    lo, hi = (int(v) for v in resolution_range)
+    if not 8 <= lo <= hi:
+        raise AGNDCError(f"training resolutions must satisfy 8 <= lo <= hi, got {lo}..{hi}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sample_recipe(seed), out_dir / f"sample_{seed:06d}.npz")
+    jobs = [(sample_recipe(seed, (lo, hi)), out_dir / f"sample_{seed:06d}.npz")
             for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:

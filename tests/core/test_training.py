@@ -364,3 +364,25 @@ def test_a_cuda_device_without_cuda_is_a_clear_error(data_dir, tmp_path):
     cfg.device = "cuda"
     with pytest.raises(AGNDCError, match="CUDA"):
         Trainer(cfg)
+
+
+def test_dataset_resolution_range(tmp_path, capsys):
+    """``--resolutions LO,HI`` draws every shape's longest side from that range."""
+    from agndc_core.cli import main
+    from agndc_core.errors import AGNDCError
+
+    paths = build_dataset(tmp_path / "a", 3, seed0=5, workers=1, progress=False,
+                          resolution_range=(20, 23))
+    for path in paths:
+        sample = load_sample(path)
+        assert 20 <= sample["recipe"]["resolution"] <= 23
+        # the voxelised shape spans that many voxels (+ the margins) on its longest side
+        assert 20 <= max(sample["lattice"].shape) - 4 <= 23 + 4
+    assert main(["train-data", "-o", str(tmp_path / "b"), "-n", "1", "--seed0", "5",
+                 "--workers", "1", "--resolutions", "20,23"]) == 0
+    assert (tmp_path / "b" / "sample_000005.npz").read_bytes() == paths[0].read_bytes()
+    assert main(["train-data", "-o", str(tmp_path / "c"), "-n", "1", "--resolutions", "20"]) != 0
+    assert "--resolutions wants LO,HI, got '20'" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
+    with pytest.raises(AGNDCError, match="lo <= hi"):
+        build_dataset(tmp_path / "d", 1, resolution_range=(64, 32), progress=False)
