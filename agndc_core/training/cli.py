@@ -59,9 +59,8 @@ def _ints(text: str) -> list[int]:
 
 
 def _cmd_data(args) -> int:
-    from .data import build_dataset
-
     from ..errors import AGNDCError
+    from .data import build_dataset
 
     bounds = _ints(args.resolutions)
     if len(bounds) != 2:

@@ -136,7 +136,6 @@ def test_sharp_mode_is_the_oracle_for_users():
         remesh(sharp.grid, method="sharp")
 
 
-
 TREAD = 0.0697  # height of the step's tread: 0.3 voxel from its layer's middle at RES
 
 
@@ -146,7 +145,7 @@ def stepped_block() -> trimesh.Trimesh:
     from manifold3d import Manifold
 
     base = Manifold.cube([0.8, 0.8, 0.4]).translate([0.0, 0.0, TREAD - 0.4])
-    riser = Manifold.cube([0.4, 0.8, 0.3]).translate([0.0, 0.0, 0.0])
+    riser = Manifold.cube([0.4, 0.8, 0.3])  # x 0..0.4: the tread is x 0.4..0.8
     mesh = (base + riser).to_mesh()
     return trimesh.Trimesh(np.asarray(mesh.vert_properties)[:, :3], np.asarray(mesh.tri_verts))
 
@@ -174,7 +173,7 @@ def test_binary_oracle_takes_the_midpoint_depth_of_axis_aligned_faces_only():
     np.testing.assert_allclose(binary.vertices[tread, 2], nets.vertices[tread, 2], atol=1e-6)
     miss = binary.vertices[tread, 2] - TREAD
     assert 0.05 * voxel < abs(miss[0]) <= 0.5 * voxel and np.ptp(miss) < 1e-6
-    # in the plane, and everywhere off the axis-aligned faces' interiors: the oracle
+    # in the tread's plane: the oracle
     np.testing.assert_allclose(binary.vertices[tread, :2], oracle.vertices[tread, :2], atol=1e-6)
     # no face of a rotated cube is axis-aligned: the binary oracle is the oracle
     turned = SHAPES["rotated_cube"]()
