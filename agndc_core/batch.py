@@ -81,6 +81,7 @@ class BatchOptions:
     device: str = "cpu"
     min_component_faces: int = 0
     threads: int | None = None  # torch threads per job; None = the worker's share of the cores
+    flat_patches: bool = True  # learned methods: flat voxel-face patches come out flat
 
 
 @dataclass(frozen=True)
@@ -219,7 +220,8 @@ def run_job(job: Job, options: BatchOptions) -> dict:
                              voxel_size=options.voxel_size, model_index=options.model_index,
                              checkpoint=options.checkpoint, threads=options.threads,
                              device=options.device,
-                             min_component_faces=options.min_component_faces)
+                             min_component_faces=options.min_component_faces,
+                             flat_patches=options.flat_patches)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         save_mesh(result.vertices, result.faces, job.output)
         row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),
@@ -462,7 +464,7 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
         fmt: "ply", "obj", "stl" or "glb".
         method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
-            min_component_faces, threads): as for ``pipeline.remesh_file`` / ``agndc remesh``.
+            min_component_faces, threads, flat_patches): as for ``pipeline.remesh_file`` / ``agndc remesh``.
         workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
         engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).
         overwrite: redo outputs that are already there and up to date.

@@ -110,6 +110,10 @@ def _add_remesh_options(p) -> None:
     p.add_argument("--model-index", type=int, default=0, help=".vox files: which model")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cuda")
     p.add_argument("--min-component-faces", type=int, default=0)
+    p.add_argument("--no-flat-patches", dest="flat_patches", action="store_false",
+                   help="learned methods: keep the network's raw vertices on flat voxel faces "
+                        "(by default each flat patch that is not a terrace of a slanted or "
+                        "curved surface is given one depth, so flat faces come out flat)")
 
 
 def _progress_bar(desc: str):
@@ -136,7 +140,8 @@ def _cmd_remesh(args) -> int:
                              voxel_size=args.voxel_size, model_index=args.model_index,
                              checkpoint=args.checkpoint, threads=args.threads,
                              device=args.device, progress=update,
-                             min_component_faces=args.min_component_faces)
+                             min_component_faces=args.min_component_faces,
+                             flat_patches=args.flat_patches)
     finally:
         bar.close()
     save_mesh(result.vertices, result.faces, args.output)
@@ -165,7 +170,8 @@ def _cmd_batch(args) -> int:
                            scheduler=args.scheduler, overwrite=args.overwrite,
                            progress=not args.no_progress, checkpoint=args.checkpoint,
                            model_index=args.model_index, threads=args.threads,
-                           device=args.device, min_component_faces=args.min_component_faces)
+                           device=args.device, min_component_faces=args.min_component_faces,
+                           flat_patches=args.flat_patches)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -106,7 +106,7 @@ def subrange(progress, lo: float, hi: float):
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
            min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None,
-           reframe: bool = True) -> RemeshResult:
+           reframe: bool = True, flat_patches: bool = True) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
     Args:
@@ -122,6 +122,9 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             ``voxelize`` leaves them; ``inference.trained_window``), so a grid's own empty
             margins do not change the result. ``remesh_mesh`` turns it off: its grids are
             voxelised meshes, framed exactly as the training data were.
+        flat_patches: learned methods: give each flat voxel-face patch that is not a terrace
+            one depth, the mean of the network's (``flatpatches.py``), so a flat face comes
+            out flat. False keeps the network's raw vertices.
     """
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
@@ -146,6 +149,10 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
                                 checkpoint, threads, device, tile,
                                 subrange(progress, 0.05, 0.9), cancel, reframe)
+            if flat_patches and method in CHECKPOINT_NAMES:  # a network's vertices
+                from .flatpatches import flatten_patches
+
+                vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)

@@ -1,0 +1,154 @@
+"""Flat patches: a flat voxel face comes out as one flat face, at the network's depth.
+
+Where a binary grid shows a flat voxel face (a patch of cells whose corners all split the same
+way along one axis), it says nothing about where the face lies inside its layer of cells: every
+depth leaves the same voxels. A network's coordinate along that axis then varies from cell to
+cell by its own noise, and a flat face comes back crumpled. ``flatten_patches`` gives every
+cell of such a patch the patch's mean coordinate along the axis: the face is exactly flat, at
+the depth the network estimated on average (which is better than the layer's midpoint on the
+dev meshes: it learned where faces tend to lie relative to the shape around them).
+
+A **patch** is a set of cells in one layer, connected through shared cell faces within the
+layer, each a **pure split** along the axis: its four lower corners are inside and its four
+upper corners outside ("up"), or the reverse ("down"). Patches of the two kinds are separate.
+
+A patch is left alone when it is a **terrace** of a slanted or curved surface: a pure split of
+the same kind one layer up or down lies within ``tol.terrace_reach`` cells of it in the plane.
+There the surface steps through the layers, and the variation of the network's coordinate
+within the patch is the slope or the curvature, not noise.
+
+``flatten_patches_naive`` is the slow, obviously correct reference (a flood fill per patch).
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+from scipy import ndimage
+
+from .tolerances import tol
+
+#: the two kinds of pure split: whether the lower corners (along the axis) are the inside ones
+KINDS = (True, False)
+
+#: connectivity within a layer: the 4 cells sharing a face with a cell, in the two in-plane axes
+#: (the last axis is the split axis after ``np.moveaxis``)
+_IN_PLANE = np.zeros((3, 3, 3), dtype=bool)
+_IN_PLANE[1, 1, 1] = _IN_PLANE[0, 1, 1] = _IN_PLANE[2, 1, 1] = True
+_IN_PLANE[1, 0, 1] = _IN_PLANE[1, 2, 1] = True
+
+
+def flatten_patches(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+    """Flatten every flat-voxel-face patch of a lattice that is not a terrace.
+
+    Args:
+        lattice: (X, Y, Z) bool, the dual-contouring lattice (grid.py).
+        vertex: (X, Y, Z, 3) float, each cell's vertex as an offset from its min corner (the
+            last layer along each axis holds no cell and is left as it is).
+
+    Returns:
+        (X, Y, Z, 3) float, a copy of ``vertex`` where the cells of every flattened patch share
+        one coordinate along the patch's axis (the mean of theirs); nothing else changes.
+    """
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.array(vertex, copy=True)
+    for axis in range(3):
+        # (X-1, Y-1, Z-1) view of the cells' coordinate along axis, split axis last
+        coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
+        for lower_inside in KINDS:
+            split = pure_splits(lattice, axis, lower_inside)
+            patches, count = ndimage.label(split, _IN_PLANE)
+            if count == 0:
+                continue
+            flat = ~terrace_patches(split, patches, count)
+            flat[0] = False  # label 0: not a patch
+            size = np.bincount(patches.ravel(), minlength=count + 1)
+            total = np.bincount(patches.ravel(), weights=coord.ravel(), minlength=count + 1)
+            mean = total / np.maximum(size, 1)
+            chosen = flat[patches]
+            coord[chosen] = mean[patches[chosen]]
+    return out
+
+
+def pure_splits(lattice: np.ndarray, axis: int, lower_inside: bool) -> np.ndarray:
+    """(cells along the two other axes, cells along ``axis``) bool: the cells whose 4 lower
+    corners along ``axis`` are all inside (``lower_inside``; outside otherwise) and whose 4
+    upper corners are all the opposite. The split axis is the last one (``np.moveaxis``)."""
+    points = np.moveaxis(lattice, axis, -1)
+    lower, upper = points[..., :-1], points[..., 1:]
+    column = lower & ~upper if lower_inside else ~lower & upper  # (X, Y, Z-1)
+    # a cell's 4 corner columns, (X-1, Y-1, Z-1)
+    return column[:-1, :-1] & column[1:, :-1] & column[:-1, 1:] & column[1:, 1:]
+
+
+def terrace_patches(split: np.ndarray, patches: np.ndarray, count: int) -> np.ndarray:
+    """(count + 1,) bool: the patches with a pure split of the same kind one layer up or down
+    within ``tol.terrace_reach`` cells in the plane (index 0, no patch, is False)."""
+    near = ndimage.binary_dilation(split, _IN_PLANE, iterations=tol.terrace_reach)
+    # near[..., k] marks the reach of layer k's splits; a patch in layer k is a terrace when
+    # layer k - 1 or k + 1 reaches it
+    stepped = np.zeros_like(split)
+    stepped[..., 1:] |= near[..., :-1]
+    stepped[..., :-1] |= near[..., 1:]
+    terrace = np.zeros(count + 1, dtype=bool)
+    terrace[patches[split & stepped]] = True
+    terrace[0] = False
+    return terrace
+
+
+def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+    """Cell-by-cell reference of ``flatten_patches`` (slow): a flood fill per patch."""
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.array(vertex, dtype=np.float64, copy=True)
+    cells = [n - 1 for n in lattice.shape]
+    for axis, lower_inside in itertools.product(range(3), KINDS):
+        def is_split(cell):
+            if any(not 0 <= cell[a] < cells[a] for a in range(3)):
+                return False
+            for corner in itertools.product((0, 1), repeat=3):
+                point = tuple(cell[a] + corner[a] for a in range(3))
+                should_be_inside = (corner[axis] == 0) == lower_inside
+                if lattice[point] != should_be_inside:
+                    return False
+            return True
+
+        in_plane = [a for a in range(3) if a != axis]
+        seen = set()
+        for start in itertools.product(*(range(n) for n in cells)):
+            if start in seen or not is_split(start):
+                continue
+            patch, todo = [], [start]
+            seen.add(start)
+            while todo:
+                cell = todo.pop()
+                patch.append(cell)
+                for a, step in itertools.product(in_plane, (-1, 1)):
+                    other = list(cell)
+                    other[a] += step
+                    other = tuple(other)
+                    if other not in seen and is_split(other):
+                        seen.add(other)
+                        todo.append(other)
+            if _is_terrace_naive(patch, axis, in_plane, is_split):
+                continue
+            mean = np.mean([vertex[cell][axis] for cell in patch])
+            for cell in patch:
+                out[cell][axis] = mean
+    return out
+
+
+def _is_terrace_naive(patch, axis, in_plane, is_split) -> bool:
+    reach = tol.terrace_reach
+    for cell in patch:
+        for da, db in itertools.product(range(-reach, reach + 1), repeat=2):
+            if abs(da) + abs(db) > reach:  # the in-plane dilation reaches a diamond
+                continue
+            for layer in (-1, 1):
+                other = list(cell)
+                other[in_plane[0]] += da
+                other[in_plane[1]] += db
+                other[axis] += layer
+                if is_split(tuple(other)):
+                    return True
+    return False

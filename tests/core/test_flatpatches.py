@@ -1,0 +1,173 @@
+"""Flat patches (fast against naive) and the invariants they promise: flat voxel faces come out
+exactly flat at the mean depth, terraces and everything else are left alone; then the same
+through ``pipeline.remesh`` with the shipped network."""
+
+import numpy as np
+import pytest
+
+from agndc_core.flatpatches import flatten_patches, flatten_patches_naive, pure_splits
+from agndc_core.grid import VoxelGrid
+from agndc_core.pipeline import remesh
+from agndc_core.tolerances import tol
+
+
+def block_lattice(shape=(14, 15, 16), lo=(3, 4, 5), hi=(10, 12, 13)):
+    """A lattice holding one solid block of points lo..hi-1."""
+    lattice = np.zeros(shape, dtype=bool)
+    lattice[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+    return lattice
+
+
+def ball_lattice(n=16, radius=5.3):
+    x, y, z = np.mgrid[:n, :n, :n] - (n - 1) / 2 + 0.21
+    return x**2 + y**2 + z**2 < radius**2
+
+
+def noisy_vertex(lattice, seed=3):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.0, 1.0, lattice.shape + (3,)).astype(np.float32)
+
+
+def random_lattices(count=24, seed=5):
+    """Unions of random blocks, half of them with a ball: flat patches, terraces, both kinds."""
+    rng = np.random.default_rng(seed)
+    for index in range(count):
+        n = int(rng.integers(8, 12))
+        lattice = np.zeros((n, n, n), dtype=bool)
+        for _ in range(3):
+            lo = rng.integers(1, n // 2, 3)
+            hi = lo + rng.integers(1, n // 2, 3)
+            lattice[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] = True
+        if index % 2:
+            lattice |= ball_lattice(n, rng.uniform(2.0, 4.0))
+        yield lattice
+
+
+def test_fast_equals_naive():
+    changed = 0
+    for seed, lattice in enumerate(random_lattices()):
+        vertex = noisy_vertex(lattice, seed)
+        fast = flatten_patches(lattice, vertex)
+        naive = flatten_patches_naive(lattice, vertex)
+        assert fast.shape == vertex.shape and fast.dtype == vertex.dtype
+        np.testing.assert_allclose(fast, naive, atol=1e-6)
+        changed += int((fast != vertex).sum())
+    assert changed > 100  # the comparison saw patches being flattened
+
+
+def test_box_faces_become_flat_at_their_mean_depth():
+    lattice = block_lattice()
+    vertex = noisy_vertex(lattice)
+    out = flatten_patches(lattice, vertex)
+    lo, hi = (3, 4, 5), (10, 12, 13)
+    for axis in range(3):
+        others = [a for a in range(3) if a != axis]
+        # the cells inside the face (not on the block's edges) of the low and high faces
+        for layer in (lo[axis] - 1, hi[axis] - 1):
+            index = [slice(lo[a], hi[a] - 1) for a in range(3)]
+            index[axis] = layer
+            face_in, face_out = vertex[tuple(index)][..., axis], out[tuple(index)][..., axis]
+            assert face_in.size == np.prod([hi[a] - 1 - lo[a] for a in others])
+            assert np.ptp(face_out) == 0.0  # exactly flat
+            assert face_out.flat[0] == pytest.approx(face_in.mean(), abs=1e-6)
+    # only coordinates along a face's axis changed, and only on the six faces
+    changed = out != vertex
+    assert changed.sum() == sum(2 * np.prod([hi[a] - 1 - lo[a] for a in range(3) if a != axis])
+                                for axis in range(3))
+
+
+def test_terraces_are_left_alone():
+    # a plane slanted by one layer every 4 cells: every flat patch has a neighbour one layer
+    # up or down within reach
+    n = 20
+    x, _, z = np.mgrid[:n, :n, :n]
+    lattice = (z < 4 + x / 4.0) & (x > 0) & (x < n - 1)
+    lattice[:, [0, n - 1], :] = False
+    lattice[..., 0] = False
+    vertex = noisy_vertex(lattice)
+    top = pure_splits(lattice, 2, lower_inside=True)
+    assert top.sum() > 100  # the terraces are there
+    out = flatten_patches(lattice, vertex)
+    # the slanted top keeps the raw values; the flat bottom (lower corners outside) is flattened
+    cells = out[:-1, :-1, :-1, 2], vertex[:-1, :-1, :-1, 2]
+    np.testing.assert_array_equal(cells[0][top], cells[1][top])
+    bottom = pure_splits(lattice, 2, lower_inside=False)
+    assert bottom.sum() > 100 and np.ptp(cells[0][bottom]) == 0.0
+
+
+def test_a_step_of_two_layers_is_no_terrace():
+    # a plateau and a strip raised 2 layers above it: a wall, not a terrace; both are flattened
+    n = 24
+    lattice = np.zeros((n, n, n), dtype=bool)
+    lattice[2:22, 2:22, 2:10] = True
+    lattice[2:8, 2:22, 10:12] = True
+    vertex = noisy_vertex(lattice)
+    out = flatten_patches(lattice, vertex)
+    plateau, strip = out[8:21, 2:21, 9, 2], out[2:7, 2:21, 11, 2]
+    assert np.ptp(plateau) == 0.0 and np.ptp(strip) == 0.0
+    assert plateau[0, 0] == pytest.approx(vertex[8:21, 2:21, 9, 2].mean(), abs=1e-6)
+    # one layer instead of two is a terrace within reach: the plateau keeps its raw values
+    lattice[2:8, 2:22, 11] = False
+    out = flatten_patches(lattice, vertex)
+    assert tol.terrace_reach >= 1  # the strip's edge is 1 cell from the plateau
+    np.testing.assert_array_equal(out[8:21, 2:21, 9, 2], vertex[8:21, 2:21, 9, 2])
+
+
+def test_half_ball_cut_is_flattened_its_pole_is_not():
+    lattice = ball_lattice(10, 4.0)
+    lattice[..., :5] = False  # half a ball: flat at its cut, terraced around its pole
+    vertex = noisy_vertex(lattice)
+    out = flatten_patches(lattice, vertex)
+    cut = pure_splits(lattice, 2, lower_inside=False)  # (split axis last: z already is)
+    assert cut.sum() > 10 and np.ptp(out[:-1, :-1, :-1, 2][cut]) == 0.0
+    pole = pure_splits(lattice, 2, lower_inside=True)
+    assert pole.any()
+    np.testing.assert_array_equal(out[:-1, :-1, :-1, 2][pole], vertex[:-1, :-1, :-1, 2][pole])
+
+
+def test_remesh_gives_the_shipped_network_flat_box_faces():
+    occupancy = np.zeros((20, 22, 24), dtype=bool)
+    occupancy[3:17, 4:18, 5:19] = True
+    grid = VoxelGrid(occupancy)
+    raw = remesh(grid, method="agndc", threads=1, flat_patches=False)
+    flat = remesh(grid, method="agndc", threads=1)
+    assert "flat patches" in flat.timings and "flat patches" not in raw.timings
+
+    def spread_on_faces(vertices):
+        # vertices near a face plane, at least 2 voxels from the block's other faces
+        spreads = []
+        for axis, (lo, hi) in enumerate([(3, 16), (4, 17), (5, 18)]):
+            inner = np.ones(len(vertices), dtype=bool)
+            for other, (olo, ohi) in enumerate([(3, 16), (4, 17), (5, 18)]):
+                if other != axis:
+                    inner &= (vertices[:, other] > olo + 2) & (vertices[:, other] < ohi - 2)
+            for plane in (lo - 0.5, hi + 0.5):
+                on = inner & (np.abs(vertices[:, axis] - plane) < 0.5)
+                assert on.sum() > 50
+                spreads.append(np.ptp(vertices[on, axis]))
+        return max(spreads)
+
+    assert spread_on_faces(flat.vertices) < 1e-5
+    assert spread_on_faces(raw.vertices) > 1e-3  # the network alone is not flat
+
+
+def test_cli_remesh_flattens_unless_told_not_to(tmp_path):
+    import trimesh
+
+    from agndc_core.cli import main
+    from agndc_core.gridio import load_mesh
+
+    source = tmp_path / "box.obj"
+    trimesh.creation.box((1.0, 0.8, 0.6)).export(source)
+    spreads = {}
+    for flag in ([], ["--no-flat-patches"]):
+        output = tmp_path / f"out{len(flag)}.ply"
+        assert main(["remesh", str(source), "-o", str(output), "--res", "24", *flag]) == 0
+        vertices, _ = load_mesh(output)
+        # the top face (z = 0.3; a voxel is 1/22): vertices near it, well inside it in x and y
+        top = (np.abs(vertices[:, 2] - 0.3) < 0.03) & (np.abs(vertices[:, 0]) < 0.35) \
+            & (np.abs(vertices[:, 1]) < 0.25)
+        assert top.sum() > 20
+        spreads[bool(flag)] = np.ptp(vertices[top, 2])
+    assert spreads[False] < 1e-6  # flat
+    assert spreads[True] > 1e-4  # the network's raw depths
