@@ -12,6 +12,7 @@ from agndc_core.checkpoint import count_parameters, default_checkpoint_path, loa
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.shapes import generate_shape
+from agndc_core.solids import TARGETS, measure
 
 #: seeds far outside the training (0..) and validation (1,000,000..) ranges
 HELD_OUT_SEEDS = (7_000_001, 7_000_002, 7_000_003, 7_000_004, 7_000_005, 7_000_006)
@@ -67,3 +68,17 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
     assert np.all(ratio < MAX_RATIO_TO_MC) and np.mean(ratio < 1.0) >= 2 / 3, cd
     # weights that learned nothing return surface nets (the prior): they must do better
     assert np.mean(cd[method]) < np.mean(cd["surfacenets"]), cd
+
+
+@pytest.mark.slow
+def test_shipped_agndc_meets_the_geometric_targets():
+    """Issue 11's analytic solids at 64³ (agndc_core/solids.py): flat box faces, the rotated
+    box's faces and a sphere within their targets; the rotated box's corners (target 0.5 voxel,
+    not met yet: 0.89 on 2026-11-25) at least nearer than surface nets puts them."""
+    _shipped("agndc")
+    agndc, prior = (measure(method, 64, threads=2) for method in ("agndc", "surfacenets"))
+    for name in ("flatness", "rotated_rms", "sphere"):
+        assert agndc[name] <= TARGETS[name], (name, agndc)
+    assert agndc["corner"] < prior["corner"], (agndc, prior)
+    # weights that learned nothing give surface nets, which misses these targets
+    assert prior["rotated_rms"] > TARGETS["rotated_rms"] and prior["sphere"] > TARGETS["sphere"]
