@@ -85,7 +85,9 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               "approximate ceiling for any method that sees only the grid. "
               "`surfacenets` (the mean of each cell's crossed-edge midpoints) and `mc_taubin` "
               f"(marching cubes + trimesh Taubin smoothing, {TAUBIN_ITERATIONS} iterations) "
-              "need no weights. "
+              "need no weights. `agndc` and `undc` include the flat-patch stage (each flat "
+              "voxel-face patch that is not a terrace takes the mean of the network's depths, "
+              "`flatpatches.py`). "
               "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring; "
               f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
     lines += ["## Models", "", _models_table(methods), ""]

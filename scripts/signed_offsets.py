@@ -19,6 +19,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from agndc_core.tolerances import tol
+
 METHODS_ON_LATTICES = ("surfacenets", "agndc")
 
 
@@ -27,7 +29,8 @@ def offsets(vertices, truth: trimesh.Trimesh, voxel: float):
     closest, _, triangle = trimesh.proximity.closest_point(truth, vertices)
     normal = truth.face_normals[triangle]
     signed = np.einsum("ij,ij->i", vertices - closest, normal) / voxel
-    aligned = np.abs(normal).max(axis=1) > 0.999
+    # the labels' test (tol.axis_aligned on the quadric's diagonal) for a single face's normal
+    aligned = (normal**2).max(axis=1) > tol.axis_aligned
     return signed[aligned], signed[~aligned]
 
 
