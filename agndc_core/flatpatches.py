@@ -39,44 +39,69 @@ _IN_PLANE[1, 1, 1] = _IN_PLANE[0, 1, 1] = _IN_PLANE[2, 1, 1] = True
 _IN_PLANE[1, 0, 1] = _IN_PLANE[1, 2, 1] = True
 
 
-def flatten_patches(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
+                    in_place: bool = False) -> np.ndarray:
     """Flatten every flat-voxel-face patch of a lattice that is not a terrace.
 
     Args:
         lattice: (X, Y, Z) bool, the dual-contouring lattice (grid.py).
         vertex: (X, Y, Z, 3) float, each cell's vertex as an offset from its min corner (the
             last layer along each axis holds no cell and is left as it is).
+        in_place: write into ``vertex`` instead of a copy (a large grid's vertices are GBs).
 
     Returns:
-        (X, Y, Z, 3) float, a copy of ``vertex`` where the cells of every flattened patch share
-        one coordinate along the patch's axis (the mean of theirs); nothing else changes.
+        (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
+        share one coordinate along the patch's axis (the mean of theirs); nothing else changes.
     """
     lattice = np.asarray(lattice, dtype=bool)
-    out = np.array(vertex, copy=True)
+    out = vertex if in_place else np.array(vertex, copy=True)
     for axis in range(3):
+        points = np.moveaxis(lattice, axis, -1)  # split axis last
         # (X-1, Y-1, Z-1) view of the cells' coordinate along axis, split axis last
         coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
-        for lower_inside in KINDS:
-            split = pure_splits(lattice, axis, lower_inside)
-            patches, count = ndimage.label(split, _IN_PLANE)
-            if count == 0:
-                continue
-            # from here on only the split cells (a few % of the volume) are touched
-            cells = np.nonzero(split)
-            patch_of = patches[cells]  # (S,) in 1..count
-            size = np.bincount(patch_of, minlength=count + 1)
-            mean = np.bincount(patch_of, weights=coord[cells], minlength=count + 1) \
-                / np.maximum(size, 1)
-            keep = ~terrace_patches(split, patches, count)[patch_of]
-            coord[tuple(c[keep] for c in cells)] = mean[patch_of[keep]]
+        layers = coord.shape[-1]
+        # a patch lies in one layer, so slabs of layers are exact and bound the memory; each
+        # slab also sees one layer beyond each end, which the terrace test reads
+        for first in range(0, layers, SLAB_LAYERS):
+            last = min(first + SLAB_LAYERS, layers)
+            lo, hi = max(first - 1, 0), min(last + 1, layers)
+            for lower_inside in KINDS:
+                _flatten_slab(points[..., lo:hi + 1], coord[..., lo:hi], lower_inside,
+                              range(first - lo, last - lo))
     return out
+
+
+#: layers of cells flattened together (memory: a few bytes per cell of a slab)
+SLAB_LAYERS = 32
+
+
+def _flatten_slab(points, coord, lower_inside: bool, written: range) -> None:
+    """Flatten the patches of one kind in ``written`` layers of a slab, in place.
+
+    points: (A, B, L + 1) bool lattice points of the slab, split axis last; coord: (A - 1,
+    B - 1, L) float view of its cells' coordinate along the split axis."""
+    split = _pure_splits_last(points, lower_inside)
+    patches, count = ndimage.label(split, _IN_PLANE)
+    if count == 0:
+        return
+    # from here on only the split cells (a few % of the volume) are touched
+    cells = np.nonzero(split)
+    patch_of = patches[cells]  # (S,) in 1..count
+    size = np.bincount(patch_of, minlength=count + 1)
+    mean = np.bincount(patch_of, weights=coord[cells], minlength=count + 1) / np.maximum(size, 1)
+    keep = ~terrace_patches(split, patches, count)[patch_of]
+    keep &= (cells[2] >= written.start) & (cells[2] < written.stop)  # halo layers: not ours
+    coord[tuple(c[keep] for c in cells)] = mean[patch_of[keep]]
 
 
 def pure_splits(lattice: np.ndarray, axis: int, lower_inside: bool) -> np.ndarray:
     """(cells along the two other axes, cells along ``axis``) bool: the cells whose 4 lower
     corners along ``axis`` are all inside (``lower_inside``; outside otherwise) and whose 4
     upper corners are all the opposite. The split axis is the last one (``np.moveaxis``)."""
-    points = np.moveaxis(lattice, axis, -1)
+    return _pure_splits_last(np.moveaxis(lattice, axis, -1), lower_inside)
+
+
+def _pure_splits_last(points: np.ndarray, lower_inside: bool) -> np.ndarray:
     lower, upper = points[..., :-1], points[..., 1:]
     column = lower & ~upper if lower_inside else ~lower & upper  # (X, Y, Z-1)
     # a cell's 4 corner columns, (X-1, Y-1, Z-1)

@@ -152,7 +152,8 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             if flat_patches and method in CHECKPOINT_NAMES:  # a network's vertices
                 from .flatpatches import flatten_patches
 
-                vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex)
+                vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
+                                    in_place=True)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)

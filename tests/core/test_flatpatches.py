@@ -5,6 +5,7 @@ through ``pipeline.remesh`` with the shipped network."""
 import numpy as np
 import pytest
 
+from agndc_core import flatpatches
 from agndc_core.flatpatches import flatten_patches, flatten_patches_naive, pure_splits
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
@@ -43,7 +44,10 @@ def random_lattices(count=24, seed=5):
         yield lattice
 
 
-def test_fast_equals_naive():
+@pytest.mark.parametrize("slab", [32, 3, 1])
+def test_fast_equals_naive(slab, monkeypatch):
+    # slabs of 3 and 1 layers put patches and their terrace neighbours in different slabs
+    monkeypatch.setattr(flatpatches, "SLAB_LAYERS", slab)
     changed = 0
     for seed, lattice in enumerate(random_lattices()):
         vertex = noisy_vertex(lattice, seed)
@@ -72,6 +76,9 @@ def test_box_faces_become_flat_at_their_mean_depth():
             assert face_out.flat[0] == pytest.approx(face_in.mean(), abs=1e-6)
     # only coordinates along a face's axis changed, and only on the six faces
     changed = out != vertex
+    same = vertex.copy()
+    assert flatten_patches(lattice, same, in_place=True) is same
+    np.testing.assert_array_equal(same, out)
     assert changed.sum() == sum(2 * np.prod([hi[a] - 1 - lo[a] for a in range(3) if a != axis])
                                 for axis in range(3))
 
