@@ -5,8 +5,9 @@ way along one axis), it says nothing about where the face lies inside its layer 
 depth leaves the same voxels. A network's coordinate along that axis then varies from cell to
 cell by its own noise, and a flat face comes back crumpled. ``flatten_patches`` gives every
 cell of such a patch the patch's mean coordinate along the axis: the face is exactly flat, at
-the depth the network estimated on average (which is better than the layer's midpoint on the
-dev meshes: it learned where faces tend to lie relative to the shape around them).
+the depth the network estimated on average. On the dev meshes at 64³ that beats the layer's
+midpoint (the network reads where faces lie from the shape around them); at 128³ the midpoint
+is slightly better, a gap for training on larger shapes to close (docs/training.md).
 
 A **patch** is a set of cells in one layer, connected through shared cell faces within the
 layer, each a **pure split** along the axis: its four lower corners are inside and its four
