@@ -359,3 +359,17 @@ def test_killed_run_leaves_no_partial_output(spheres, tmp_path, sig):
     assert sum(r["status"] == "ok" for r in rows) == N_SPHERES - len(done)
     assert len(list(out.glob("*.ply"))) == N_SPHERES
     assert not any(TEMP_MARK in p.name for p in out.iterdir())
+
+
+def test_no_flat_patches_reaches_every_job(mixed, tmp_path):
+    """``agndc batch --no-flat-patches`` gives what ``agndc remesh --no-flat-patches`` gives, and
+    not what the default (flat patches) gives."""
+    source = mixed / "a.npy"
+    out = tmp_path / "out"
+    assert main(["batch", str(source), "-o", str(out), "--method", "agndc", "--workers", "1",
+                 "--no-flat-patches", "--no-progress"]) == 0
+    raw, flat = tmp_path / "raw.ply", tmp_path / "flat.ply"
+    assert main(["remesh", str(source), "-o", str(raw), "--no-flat-patches"]) == 0
+    assert main(["remesh", str(source), "-o", str(flat)]) == 0
+    assert (out / "a.ply").read_bytes() == raw.read_bytes()
+    assert raw.read_bytes() != flat.read_bytes()
