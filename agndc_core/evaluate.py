@@ -173,8 +173,8 @@ def headroom_line(summaries, columns=HEADROOM_COLUMNS, ceiling: str = "oracle") 
                  for method, s in shares.items()]
         parts.append(f"{column.upper()}: " + ", ".join(cells))
     return (f"Share of the MC→{ceiling} headroom (0 % = mc, 100 % = {ceiling}, from the means "
-            f"above; (mc − method) / (mc − {ceiling}) for CD, (method − mc) / ({ceiling} − mc) "
-            "for EF1): " + "; ".join(parts) + ".")
+            f"above; (mc − method) / (mc − {ceiling}) for CD, "
+            f"(method − mc) / ({ceiling} − mc) for EF1): " + "; ".join(parts) + ".")
 
 
 def headroom_lines(summaries, columns=HEADROOM_COLUMNS) -> list[str]:

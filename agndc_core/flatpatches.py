@@ -33,6 +33,9 @@ from .tolerances import tol
 #: the two kinds of pure split: whether the lower corners (along the axis) are the inside ones
 KINDS = (True, False)
 
+#: layers of cells flattened together (memory: a few bytes per cell of a slab)
+SLAB_LAYERS = 32
+
 #: connectivity within a layer: the 4 cells sharing a face with a cell, in the two in-plane axes
 #: (the last axis is the split axis after ``np.moveaxis``)
 _IN_PLANE = np.zeros((3, 3, 3), dtype=bool)
@@ -70,10 +73,6 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
                 _flatten_slab(points[..., lo:hi + 1], coord[..., lo:hi], lower_inside,
                               range(first - lo, last - lo))
     return out
-
-
-#: layers of cells flattened together (memory: a few bytes per cell of a slab)
-SLAB_LAYERS = 32
 
 
 def _flatten_slab(points, coord, lower_inside: bool, written: range) -> None:
