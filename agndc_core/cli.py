@@ -72,7 +72,9 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("eval", help="evaluate methods on a folder of meshes (CSV + markdown)")
     p.add_argument("folder", type=Path)
     p.add_argument("-o", "--out", type=Path, default=Path("out/eval"))
-    p.add_argument("--methods", default="mc,oracle", help=f"comma list of {','.join(METHODS)}")
+    p.add_argument("--methods", default="mc,oracle",
+                   help=f"comma list of {','.join(METHODS)}; surfacenets, undc or agndc with "
+                        "'+bounds' also get the mesh's bounding box (agndc_core/evaluate.py)")
     p.add_argument("--res", type=int, default=64)
     p.add_argument("--samples", type=int, default=100_000)
     p.add_argument("--limit", type=int, help="only the first N meshes")
@@ -114,6 +116,10 @@ def _add_remesh_options(p) -> None:
                    help="learned methods: keep the network's raw vertices on flat voxel faces "
                         "(by default each flat patch that is not a terrace of a slanted or "
                         "curved surface is given one depth, so flat faces come out flat)")
+    p.add_argument("--no-source-bounds", dest="source_bounds", action="store_false",
+                   help="mesh input, dual methods: use the voxel grid alone (by default the "
+                        "faces that bound the mesh are put on its bounding box, which the grid "
+                        "cannot place within a voxel, and no vertex lies beyond it)")
 
 
 def _progress_bar(desc: str):
@@ -141,7 +147,8 @@ def _cmd_remesh(args) -> int:
                              checkpoint=args.checkpoint, threads=args.threads,
                              device=args.device, progress=update,
                              min_component_faces=args.min_component_faces,
-                             flat_patches=args.flat_patches)
+                             flat_patches=args.flat_patches,
+                             source_bounds=args.source_bounds)
     finally:
         bar.close()
     save_mesh(result.vertices, result.faces, args.output)
@@ -171,7 +178,8 @@ def _cmd_batch(args) -> int:
                            progress=not args.no_progress, checkpoint=args.checkpoint,
                            model_index=args.model_index, threads=args.threads,
                            device=args.device, min_component_faces=args.min_component_faces,
-                           flat_patches=args.flat_patches)
+                           flat_patches=args.flat_patches,
+                           source_bounds=args.source_bounds)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

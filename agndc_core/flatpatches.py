@@ -18,7 +18,16 @@ the same kind one layer up or down lies within ``tol.terrace_reach`` cells of it
 There the surface steps through the layers, and the variation of the network's coordinate
 within the patch is the slope or the curvature, not noise.
 
-``flatten_patches_naive`` is the slow, obviously correct reference (a flood fill per patch).
+**Source bounds.** When the grid was voxelised from a mesh, the mesh's bounding box is known
+(``VoxelGrid.source_bounds``), and it says what the grid cannot: the faces that bound the shape
+lie exactly on it, and no surface lies beyond it. ``snap_to_bounds`` gives every patch of the
+outermost layer of cells on each side (not a terrace, of the kind that faces outward there) the
+coordinate of that side's bounding plane, and pulls every other vertex of that layer that lies
+beyond the plane back onto it (the edges and corners of a bounding face). A side whose plane
+lies outside its outermost layer (a part too thin to leave voxels sticks out) is left alone.
+
+``flatten_patches_naive`` and ``snap_to_bounds_naive`` are the slow, obviously correct
+references (a flood fill per patch).
 """
 
 from __future__ import annotations
@@ -94,6 +103,65 @@ def _flatten_slab(points, coord, lower_inside: bool, written: range) -> None:
     coord[tuple(c[keep] for c in cells)] = mean[patch_of[keep]]
 
 
+def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
+                   in_place: bool = False) -> np.ndarray:
+    """Put the flat patches that bound the shape on the source mesh's bounding planes.
+
+    Args:
+        lattice: (X, Y, Z) bool, the dual-contouring lattice (grid.py).
+        vertex: (X, Y, Z, 3) float, each cell's vertex as an offset from its min corner.
+        bounds: (2, 3) float, the source mesh's bounding box (min corner, max corner) in
+            lattice coordinates (``VoxelGrid.world_to_index`` + ``grid.LATTICE_PAD``).
+        in_place: write into ``vertex`` instead of a copy.
+
+    Returns:
+        (X, Y, Z, 3) float, ``vertex`` (or a copy) where every patch of each side's outermost
+        layer of cells that faces outward and is not a terrace has that side's plane as its
+        coordinate along the axis, and no other vertex of that layer lies beyond the plane;
+        nothing else changes.
+    """
+    lattice = np.asarray(lattice, dtype=bool)
+    out = vertex if in_place else np.array(vertex, copy=True)
+    for axis, lower_inside, layer, local in outermost_layers(lattice, bounds):
+        inner = layer - 1 if lower_inside else layer + 1  # the next layer into the shape
+        first = min(layer, inner)
+        # the two cell layers' 3 point layers, split axis last
+        points = np.moveaxis(lattice, axis, -1)[..., first:first + 3]
+        split = _pure_splits_last(points, lower_inside)  # (A - 1, B - 1, 2)
+        # (X', Y', Z') view of the layer's coordinate along the axis (split axis moved last)
+        coord = np.moveaxis(out[..., axis], axis, -1)[..., layer]
+        # the surface does not reach beyond its bounding box: edges and corners of the face
+        clamp = np.minimum if lower_inside else np.maximum
+        clamp(coord, local, out=coord)
+        patches, count = ndimage.label(split, _IN_PLANE)
+        if count == 0:
+            continue
+        terrace = terrace_patches(split, patches, count)
+        mine = patches[..., layer - first]
+        coord[:-1, :-1][(mine > 0) & ~terrace[mine]] = local
+    return out
+
+
+def outermost_layers(lattice: np.ndarray, bounds):
+    """Yield (axis, lower_inside, layer, local) for each side of the shape whose bounding plane
+    lies in its outermost layer of cells: ``layer`` is that cell layer along ``axis``, the
+    outward-facing pure split there has its lower corners inside when ``lower_inside``, and the
+    plane sits at ``local`` (in [0, 1]) from the layer's lower points."""
+    bounds = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
+    for axis in range(3):
+        occupied = np.flatnonzero(lattice.any(axis=tuple(a for a in range(3) if a != axis)))
+        if len(occupied) == 0:
+            return
+        # the max side: cells between the last occupied layer of points and the empty one above;
+        # the min side: cells between the empty layer below the first occupied one and it
+        for lower_inside, layer, plane in ((True, occupied[-1], bounds[1, axis]),
+                                           (False, occupied[0] - 1, bounds[0, axis])):
+            local = plane - layer
+            if 0 <= layer < lattice.shape[axis] - 1 \
+                    and -tol.cell_slack <= local <= 1 + tol.cell_slack:
+                yield axis, lower_inside, int(layer), float(np.clip(local, 0.0, 1.0))
+
+
 def pure_splits(lattice: np.ndarray, axis: int, lower_inside: bool) -> np.ndarray:
     """(cells along the two other axes, cells along ``axis``) bool: the cells whose 4 lower
     corners along ``axis`` are all inside (``lower_inside``; outside otherwise) and whose 4
@@ -127,41 +195,75 @@ def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray
     """Cell-by-cell reference of ``flatten_patches`` (slow): a flood fill per patch."""
     lattice = np.asarray(lattice, dtype=bool)
     out = np.array(vertex, dtype=np.float64, copy=True)
-    cells = [n - 1 for n in lattice.shape]
     for axis, lower_inside in itertools.product(range(3), KINDS):
-        def is_split(cell):
-            if any(not 0 <= cell[a] < cells[a] for a in range(3)):
-                return False
-            for corner in itertools.product((0, 1), repeat=3):
-                point = tuple(cell[a] + corner[a] for a in range(3))
-                should_be_inside = (corner[axis] == 0) == lower_inside
-                if lattice[point] != should_be_inside:
-                    return False
-            return True
-
-        in_plane = [a for a in range(3) if a != axis]
-        seen = set()
-        for start in itertools.product(*(range(n) for n in cells)):
-            if start in seen or not is_split(start):
-                continue
-            patch, todo = [], [start]
-            seen.add(start)
-            while todo:
-                cell = todo.pop()
-                patch.append(cell)
-                for a, step in itertools.product(in_plane, (-1, 1)):
-                    other = list(cell)
-                    other[a] += step
-                    other = tuple(other)
-                    if other not in seen and is_split(other):
-                        seen.add(other)
-                        todo.append(other)
-            if _is_terrace_naive(patch, axis, in_plane, is_split):
-                continue
+        for patch in _patches_naive(lattice, axis, lower_inside):
             mean = np.mean([vertex[cell][axis] for cell in patch])
             for cell in patch:
                 out[cell][axis] = mean
     return out
+
+
+def snap_to_bounds_naive(lattice: np.ndarray, vertex: np.ndarray, bounds) -> np.ndarray:
+    """Cell-by-cell reference of ``snap_to_bounds`` (slow)."""
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.array(vertex, dtype=np.float64, copy=True)
+    occupied = np.argwhere(lattice)
+    for axis, lower_inside in itertools.product(range(3), KINDS):
+        # outward faces: up on the max side (lower corners inside), down on the min side
+        if lower_inside:
+            layer, plane = occupied[:, axis].max(), bounds[1][axis]
+        else:
+            layer, plane = occupied[:, axis].min() - 1, bounds[0][axis]
+        local = plane - layer
+        if not (0 <= layer < lattice.shape[axis] - 1
+                and -tol.cell_slack <= local <= 1 + tol.cell_slack):
+            continue
+        local = min(max(local, 0.0), 1.0)
+        for point in itertools.product(*(range(n) for n in lattice.shape)):
+            if point[axis] == layer:  # no vertex of the layer beyond the plane
+                beyond = out[point][axis] > local if lower_inside else out[point][axis] < local
+                if beyond:
+                    out[point][axis] = local
+        for patch in _patches_naive(lattice, axis, lower_inside):
+            if patch[0][axis] == layer:  # a patch lies in one layer
+                for cell in patch:
+                    out[cell][axis] = local
+    return out
+
+
+def _patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
+    """Yield each patch (a list of cells) of one axis and kind that is not a terrace."""
+    cells = [n - 1 for n in lattice.shape]
+
+    def is_split(cell):
+        if any(not 0 <= cell[a] < cells[a] for a in range(3)):
+            return False
+        for corner in itertools.product((0, 1), repeat=3):
+            point = tuple(cell[a] + corner[a] for a in range(3))
+            should_be_inside = (corner[axis] == 0) == lower_inside
+            if lattice[point] != should_be_inside:
+                return False
+        return True
+
+    in_plane = [a for a in range(3) if a != axis]
+    seen = set()
+    for start in itertools.product(*(range(n) for n in cells)):
+        if start in seen or not is_split(start):
+            continue
+        patch, todo = [], [start]
+        seen.add(start)
+        while todo:
+            cell = todo.pop()
+            patch.append(cell)
+            for a, step in itertools.product(in_plane, (-1, 1)):
+                other = list(cell)
+                other[a] += step
+                other = tuple(other)
+                if other not in seen and is_split(other):
+                    seen.add(other)
+                    todo.append(other)
+        if not _is_terrace_naive(patch, axis, in_plane, is_split):
+            yield patch
 
 
 def _is_terrace_naive(patch, axis, in_plane, is_split) -> bool:

@@ -58,11 +58,17 @@ class VoxelGrid:
         occupancy: (X, Y, Z) bool, True where the voxel centre is inside the solid.
         affine: (4, 4) float64, index coordinates (voxel centres) -> world coordinates.
         source: free text naming where the grid came from (file name, mesh name), for messages.
+        source_bounds: (2, 3) float64 world (min, max) corners of the bounding box of the mesh
+            this grid was voxelised from (``voxelize`` sets it), or None for a grid that came
+            as a grid. The grid alone cannot tell where an axis-aligned face lies inside its
+            layer of voxels; for the faces that bound the mesh, these six numbers can
+            (``flatpatches.snap_to_bounds``).
     """
 
     occupancy: np.ndarray
     affine: np.ndarray = field(default_factory=lambda: np.eye(4))
     source: str = "array"
+    source_bounds: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.occupancy = as_occupancy(self.occupancy, name=self.source)
@@ -72,9 +78,17 @@ class VoxelGrid:
         if abs(np.linalg.det(affine[:3, :3])) < 1e-30:
             raise GridError(f"{self.source}: affine is singular (zero voxel size?)")
         self.affine = affine
+        if self.source_bounds is not None:
+            bounds = np.asarray(self.source_bounds, dtype=np.float64)
+            if bounds.shape != (2, 3) or not np.all(np.isfinite(bounds)) \
+                    or np.any(bounds[0] > bounds[1]):
+                raise GridError(f"{self.source}: source_bounds must be finite (min, max) corners "
+                                f"of shape (2, 3), got {bounds.tolist()}")
+            self.source_bounds = bounds
 
     @classmethod
-    def from_spacing(cls, occupancy, voxel_size=1.0, origin=(0.0, 0.0, 0.0), source="array"):
+    def from_spacing(cls, occupancy, voxel_size=1.0, origin=(0.0, 0.0, 0.0), source="array",
+                     source_bounds=None):
         """Build an axis-aligned grid: ``voxel_size`` scalar or (3,), ``origin`` = centre of voxel 0."""
         size = np.broadcast_to(np.asarray(voxel_size, dtype=np.float64), (3,))
         if np.any(~np.isfinite(size)) or np.any(size <= 0):
@@ -82,7 +96,7 @@ class VoxelGrid:
         affine = np.eye(4)
         affine[:3, :3] = np.diag(size)
         affine[:3, 3] = np.asarray(origin, dtype=np.float64)
-        return cls(occupancy, affine, source)
+        return cls(occupancy, affine, source, source_bounds)
 
     @property
     def shape(self) -> tuple[int, int, int]:

@@ -43,7 +43,7 @@ import numpy as np
 
 from .contour import dual_contour
 from .errors import AGNDCError, CancelledError, MeshError
-from .grid import VoxelGrid, lattice_to_world, pad_to_lattice
+from .grid import LATTICE_PAD, VoxelGrid, lattice_to_world, pad_to_lattice
 from .labels import crossed_edges
 
 METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "oracle_binary", "sharp")
@@ -51,6 +51,9 @@ METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "oracle_
 MESH_ONLY_METHODS = ("oracle", "oracle_binary", "sharp")
 #: default checkpoint name per learned method (agndc_core/weights/<name>.safetensors)
 CHECKPOINT_NAMES = {"agndc": "agndc", "undc": "undc"}
+#: methods whose dual vertices can be put on a voxelised mesh's bounding box
+#: (``remesh(source_bounds=True)``); the oracles keep their own definitions
+BOUNDED_METHODS = ("agndc", "undc", "surfacenets")
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10
@@ -106,7 +109,8 @@ def subrange(progress, lo: float, hi: float):
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
            min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None,
-           reframe: bool = True, flat_patches: bool = True) -> RemeshResult:
+           reframe: bool = True, flat_patches: bool = True,
+           source_bounds: bool = True) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
     Args:
@@ -125,6 +129,10 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         flat_patches: learned methods: give each flat voxel-face patch that is not a terrace
             one depth, the mean of the network's (``flatpatches.py``), so a flat face comes
             out flat. False keeps the network's raw vertices.
+        source_bounds: dual methods (``BOUNDED_METHODS``) on a grid voxelised from a mesh
+            (``grid.source_bounds``): the flat patches that bound the shape lie on the mesh's
+            bounding box (``flatpatches.snap_to_bounds``), so the result keeps the source's
+            dimensions. False uses the grid alone, as a method given only the grid must.
     """
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
@@ -154,6 +162,9 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
 
                 vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
                                     in_place=True)
+        if source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
+            vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
+                                vertex)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
@@ -162,6 +173,21 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
     if progress is not None:
         progress(1.0, "done")
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
+
+
+def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray):
+    """``flatpatches.snap_to_bounds`` with the grid's source bounds in lattice coordinates; a
+    grid whose axes are not the world's (a rotated affine) has no axis-aligned bounding planes
+    in its own frame and is left as it is."""
+    from .flatpatches import snap_to_bounds
+
+    linear = grid.affine[:3, :3]
+    if np.count_nonzero(linear - np.diag(np.diag(linear))):
+        return vertex
+    corners = grid.world_to_index(grid.source_bounds) + LATTICE_PAD  # (2, 3)
+    # a mirroring axis (negative voxel size) swaps which corner is the min one
+    bounds = np.stack([corners.min(axis=0), corners.max(axis=0)])
+    return snap_to_bounds(lattice, vertex, bounds, in_place=True)
 
 
 def orient_to_affine(faces_fx3: np.ndarray, affine: np.ndarray) -> np.ndarray:

@@ -41,7 +41,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
             seen at different positions relative to the voxel centres).
 
     Returns:
-        VoxelGrid whose voxel centres are the sample points; voxel size is the same on all axes.
+        VoxelGrid whose voxel centres are the sample points; voxel size is the same on all axes;
+        its ``source_bounds`` is the mesh's bounding box.
     """
     vertices, faces = check_mesh(vertices, faces, source)
     if not 2 * margin + 1 <= resolution <= 1024:
@@ -52,7 +53,10 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
     occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule))
-    return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source)
+    # the surface's own extent (vertices no face uses are not part of it)
+    used = vertices[np.unique(faces)]
+    bounds = np.stack([used.min(axis=0), used.max(axis=0)])
+    return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source, source_bounds=bounds)
 
 
 def grid_layout(extent, resolution: int, margin: int = 1) -> tuple[float, np.ndarray]:

@@ -373,3 +373,18 @@ def test_no_flat_patches_reaches_every_job(mixed, tmp_path):
     assert main(["remesh", str(source), "-o", str(flat)]) == 0
     assert (out / "a.ply").read_bytes() == raw.read_bytes()
     assert raw.read_bytes() != flat.read_bytes()
+
+
+def test_no_source_bounds_reaches_every_job(mixed, tmp_path):
+    """``agndc batch --no-source-bounds`` gives what ``agndc remesh --no-source-bounds`` gives
+    for a mesh, and not what the default (the mesh's bounding box) gives."""
+    source = mixed / "c.obj"
+    out = tmp_path / "out"
+    assert main(["batch", str(source), "-o", str(out), "--method", "surfacenets",
+                 "--workers", "1", "--no-source-bounds", "--no-progress"]) == 0
+    alone, bounded = tmp_path / "alone.ply", tmp_path / "bounded.ply"
+    assert main(["remesh", str(source), "-o", str(alone), "--method", "surfacenets",
+                 "--no-source-bounds"]) == 0
+    assert main(["remesh", str(source), "-o", str(bounded), "--method", "surfacenets"]) == 0
+    assert (out / "c.ply").read_bytes() == alone.read_bytes()
+    assert alone.read_bytes() != bounded.read_bytes()

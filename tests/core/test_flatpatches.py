@@ -1,12 +1,14 @@
 """Flat patches (fast against naive) and the invariants they promise: flat voxel faces come out
 exactly flat at the mean depth, terraces and everything else are left alone; then the same
-through ``pipeline.remesh`` with the shipped network."""
+through ``pipeline.remesh`` with the shipped network. Then the source bounds: the faces that
+bound a voxelised mesh land on its bounding box, and nothing lies beyond it."""
 
 import numpy as np
 import pytest
 
 from agndc_core import flatpatches
-from agndc_core.flatpatches import flatten_patches, flatten_patches_naive, pure_splits
+from agndc_core.flatpatches import (flatten_patches, flatten_patches_naive, pure_splits,
+                                    snap_to_bounds, snap_to_bounds_naive)
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
 from agndc_core.tolerances import tol
@@ -169,7 +171,9 @@ def test_cli_remesh_flattens_unless_told_not_to(tmp_path):
     spreads = {}
     for flag in ([], ["--no-flat-patches"]):
         output = tmp_path / f"out{len(flag)}.ply"
-        assert main(["remesh", str(source), "-o", str(output), "--res", "24", *flag]) == 0
+        # the grid alone: with the source bounds the top face lies on the box either way
+        assert main(["remesh", str(source), "-o", str(output), "--res", "24",
+                     "--no-source-bounds", *flag]) == 0
         vertices, _ = load_mesh(output)
         # the top face (z = 0.3; a voxel is 1/22): vertices near it, well inside it in x and y
         top = (np.abs(vertices[:, 2] - 0.3) < 0.03) & (np.abs(vertices[:, 0]) < 0.35) \
@@ -178,3 +182,166 @@ def test_cli_remesh_flattens_unless_told_not_to(tmp_path):
         spreads[bool(flag)] = np.ptp(vertices[top, 2])
     assert spreads[False] < 1e-6  # flat
     assert spreads[True] > 1e-4  # the network's raw depths
+
+
+# ---------------------------------------------------------------------------- source bounds
+def extreme_layers(lattice):
+    """(first, last) occupied layer of points along each axis: (3, 2) int."""
+    return np.array([[np.flatnonzero(lattice.any(axis=tuple(b for b in range(3) if b != a)))[i]
+                      for i in (0, -1)] for a in range(3)])
+
+
+def bounds_in_layers(lattice, rng):
+    """Random (2, 3) bounds, each plane inside its side's outermost layer of cells."""
+    ends = extreme_layers(lattice)
+    return np.stack([ends[:, 0] - 1 + rng.uniform(0, 1, 3), ends[:, 1] + rng.uniform(0, 1, 3)])
+
+
+def test_snap_to_bounds_fast_equals_naive():
+    rng = np.random.default_rng(11)
+    changed = 0
+    for seed, lattice in enumerate(random_lattices(16)):
+        vertex = noisy_vertex(lattice, seed)
+        bounds = bounds_in_layers(lattice, rng)
+        if seed % 4 == 3:  # some sides' planes beyond their layer: those sides are left alone
+            bounds[0, seed % 3] -= 1.5
+            bounds[1, (seed + 1) % 3] += 1.5
+        fast = snap_to_bounds(lattice, vertex, bounds)
+        naive = snap_to_bounds_naive(lattice, vertex, bounds)
+        assert fast.shape == vertex.shape and fast.dtype == vertex.dtype
+        np.testing.assert_allclose(fast, naive, atol=1e-6)
+        changed += int((fast != vertex).sum())
+    assert changed > 100
+
+
+def test_a_block_lands_on_its_bounds_and_nothing_else_moves():
+    lo, hi = (3, 4, 5), (10, 12, 13)
+    lattice = block_lattice(lo=lo, hi=hi)
+    vertex = noisy_vertex(lattice)
+    planes = np.array([[2.3, 3.6, 4.55], [9.7, 11.2, 12.01]])  # in the outermost layers
+    out = snap_to_bounds(lattice, vertex, planes)
+    same = vertex.copy()
+    assert snap_to_bounds(lattice, same, planes, in_place=True) is same
+    np.testing.assert_array_equal(same, out)
+    for axis in range(3):
+        for side, layer in ((0, lo[axis] - 1), (1, hi[axis] - 1)):
+            index = [slice(lo[a], hi[a] - 1) for a in range(3)]  # the face's inner cells
+            index[axis] = layer
+            face = out[tuple(index)][..., axis]
+            assert np.all(face == np.float32(planes[side, axis] - layer))
+            # no vertex of the outermost layer beyond the plane (the face's edges and corners)
+            whole = np.take(out[..., axis], layer, axis=axis) + layer
+            assert np.all(whole <= planes[1, axis] + 1e-6) if side else \
+                np.all(whole >= planes[0, axis] - 1e-6)
+    # only coordinates along an axis, only in that axis' two outermost layers, changed
+    moved = np.argwhere(out != vertex)
+    assert len(moved) > 0
+    for *cell, axis in moved:
+        assert cell[axis] in (lo[axis] - 1, hi[axis] - 1)
+
+
+def test_a_plane_outside_its_layer_changes_nothing():
+    lattice = block_lattice()
+    vertex = noisy_vertex(lattice)
+    # the mesh reaches 1.4 cells beyond the grid's outermost layer (a part too thin for voxels)
+    planes = np.array([[2.0 - 1.4, 3.5, 4.5], [9.5, 11.5, 12.5]])
+    out = snap_to_bounds(lattice, vertex, planes)
+    np.testing.assert_array_equal(out[2, :, :, 0], vertex[2, :, :, 0])  # the low x side
+    assert (out[9, :, :, 0] != vertex[9, :, :, 0]).any()  # the other sides still land
+
+
+def test_a_balls_pole_is_only_kept_inside_its_plane():
+    lattice = ball_lattice(10, 4.0)  # its pole is a terrace (test_half_ball_cut_...)
+    vertex = noisy_vertex(lattice)
+    ends = extreme_layers(lattice)
+    planes = np.stack([ends[:, 0] - 0.5, ends[:, 1] + 0.5])
+    out = snap_to_bounds(lattice, vertex, planes)
+    top = ends[2, 1]
+    pole = pure_splits(lattice, 2, lower_inside=True)[..., top]
+    assert pole.any()
+    raw, got = vertex[:-1, :-1, top, 2][pole], out[:-1, :-1, top, 2][pole]
+    # a terrace: not put on the plane, only clamped to it
+    np.testing.assert_array_equal(got, np.minimum(raw, 0.5))
+    assert (raw < 0.5).any()
+
+
+def test_remesh_keeps_a_meshs_bounding_box():
+    """Mesh input: the dual methods' output has the mesh's own bounding box, and its axis-aligned
+    bounding faces lie on it; without the source bounds (or with marching cubes) it does not."""
+    import trimesh
+
+    from agndc_core.pipeline import remesh_mesh
+
+    box = trimesh.creation.box((1.0, 0.613, 0.377))
+    for method in ("surfacenets", "agndc", "undc"):
+        result = remesh_mesh(box.vertices, box.faces, resolution=32, method=method, threads=1)
+        voxel = result.grid.voxel_size[0]
+        assert "source bounds" in result.timings
+        np.testing.assert_allclose(result.vertices.min(0), box.bounds[0], atol=1e-5 * voxel)
+        np.testing.assert_allclose(result.vertices.max(0), box.bounds[1], atol=1e-5 * voxel)
+        # every vertex near a face plane is on it (flat, at the true depth)
+        distance = np.abs(np.abs(result.vertices) - box.extents / 2) / voxel
+        assert np.all((distance.min(axis=1) < 1e-4) | (distance.min(axis=1) > 0.75))
+        alone = remesh_mesh(box.vertices, box.faces, resolution=32, method=method, threads=1,
+                            source_bounds=False)
+        assert "source bounds" not in alone.timings
+        assert np.abs(alone.vertices.max(0) - box.bounds[1]).max() > 0.05 * voxel
+    mc = [remesh_mesh(box.vertices, box.faces, resolution=32, method="mc", source_bounds=flag)
+          for flag in (True, False)]
+    np.testing.assert_array_equal(mc[0].vertices, mc[1].vertices)
+
+
+def test_a_mirrored_grid_keeps_its_bounds():
+    """A grid whose x axis runs backwards in world space (negative voxel size): the bounds'
+    min and max corners swap in index space."""
+    import trimesh
+
+    from agndc_core.pipeline import remesh
+    from agndc_core.voxelize import voxelize
+
+    box = trimesh.creation.box((1.0, 0.613, 0.377))
+    grid = voxelize(box.vertices, box.faces, 24)
+    affine = grid.affine.copy()
+    affine[0, 0] = -affine[0, 0]
+    affine[0, 3] = grid.affine[0, 3] + (grid.shape[0] - 1) * grid.affine[0, 0]
+    mirrored = VoxelGrid(grid.occupancy[::-1], affine, "mirrored", grid.source_bounds)
+    result = remesh(mirrored, method="surfacenets")
+    np.testing.assert_allclose(result.vertices.min(0), box.bounds[0], atol=1e-6)
+    np.testing.assert_allclose(result.vertices.max(0), box.bounds[1], atol=1e-6)
+
+
+def test_voxelize_records_the_bounds_and_the_grid_checks_them():
+    import trimesh
+
+    from agndc_core.errors import GridError
+    from agndc_core.voxelize import voxelize
+
+    box = trimesh.creation.box((1.0, 0.6, 0.4))
+    # a vertex that no face uses is not part of the surface
+    vertices = np.vstack([box.vertices, [[5.0, 5.0, 5.0]]])
+    grid = voxelize(vertices, box.faces, 16)
+    np.testing.assert_array_equal(grid.source_bounds, box.bounds)
+    with pytest.raises(GridError, match="source_bounds"):
+        VoxelGrid(grid.occupancy, grid.affine, "g", np.array([[1.0, 0, 0], [0, 1.0, 1.0]]))
+    with pytest.raises(GridError, match="source_bounds"):
+        VoxelGrid(grid.occupancy, grid.affine, "g", np.zeros(3))
+
+
+def test_cli_keeps_the_bounds_unless_told_not_to(tmp_path):
+    import trimesh
+
+    from agndc_core.cli import main
+    from agndc_core.gridio import load_mesh
+
+    source = tmp_path / "box.obj"
+    box = trimesh.creation.box((1.0, 0.613, 0.377))
+    box.export(source)
+    tops = {}
+    for flag in ([], ["--no-source-bounds"]):
+        output = tmp_path / f"out{len(flag)}.ply"
+        assert main(["remesh", str(source), "-o", str(output), "--res", "24",
+                     "--method", "surfacenets", *flag]) == 0
+        vertices, _ = load_mesh(output)
+        tops[bool(flag)] = vertices[:, 2].max()
+    assert tops[False] == pytest.approx(0.377 / 2, abs=1e-6)
+    assert abs(tops[True] - 0.377 / 2) > 1e-3
