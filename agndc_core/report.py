@@ -130,25 +130,30 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
     return "\n".join(lines)
 
 
+#: the sentences of ``_comparison``: AGNDC against each baseline given the same information
+COMPARISONS = (("agndc", ("mc", "surfacenets", "undc")),
+               ("agndc+bounds", ("surfacenets+bounds", "undc+bounds")))
+
+
 def _comparison(summaries) -> list[str]:
     """Sentences: AGNDC against each baseline, metric by metric (computed, not written by hand)."""
     by_method = {s["method"]: s for s in summaries}
-    if "agndc" not in by_method:
-        return []
     lower_is_better = {"cd", "ecd"}
     out = []
-    for base in ("mc", "surfacenets", "undc"):
-        if base not in by_method:
-            continue
-        parts = []
-        for column in METRIC_COLUMNS:
-            a, b = by_method["agndc"][column], by_method[base][column]
-            if not (math.isfinite(a) and math.isfinite(b)) or b == 0:
+    for method, bases in COMPARISONS:
+        for base in bases:
+            if method not in by_method or base not in by_method:
                 continue
-            better = a < b if column in lower_is_better else a > b
-            parts.append(f"{column.upper()} {100 * (a - b) / abs(b):+.1f} % "
-                         f"({'better' if better else 'worse'})")
-        out.append(f"AGNDC against {base}: " + ", ".join(parts) + ".")
+            parts = []
+            for column in METRIC_COLUMNS:
+                a, b = by_method[method][column], by_method[base][column]
+                if not (math.isfinite(a) and math.isfinite(b)) or b == 0:
+                    continue
+                better = a < b if column in lower_is_better else a > b
+                parts.append(f"{column.upper()} {100 * (a - b) / abs(b):+.1f} % "
+                             f"({'better' if better else 'worse'})")
+            out.append(f"{method.upper().replace('+BOUNDS', '+bounds')} against {base}: "
+                       + ", ".join(parts) + ".")
     return out + [""] if out else []
 
 

@@ -80,6 +80,8 @@ def test_report_on_a_small_folder(tmp_path):
         assert f"| {method} | 2 |" in text
     assert "AGNDC against mc: CD " in text and "AGNDC against undc: CD " in text
     assert "AGNDC against surfacenets: CD " in text
+    assert "AGNDC+bounds against undc+bounds: CD " in text
+    assert "AGNDC+bounds against surfacenets+bounds: CD " in text
     for ceiling in ("oracle", "oracle_binary"):
         headroom = [line for line in text.splitlines()
                     if line.startswith(f"Share of the MC→{ceiling} headroom")]
