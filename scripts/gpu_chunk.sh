@@ -17,8 +17,20 @@
 # AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
 # AGNDC_RESOLUTIONS=LO,HI: the training shapes' voxels on their longest side (default 32,128);
 # each range has its own data folder. The held-out samples stay 32-128 (comparable runs).
+#
+# A study, several runs side by side on the one GPU (a width-16 step is bound by launching
+# kernels, not by the GPU, docs/training.md):
+#
+#   bash scripts/gpu_chunk.sh @STUDY SECONDS [common `agndc train` options...]
+#
+# STUDY is a file of lines "RUN [its own train options]" (# comments). Every run trains on the
+# same data with the common options and then its own (the last of a repeated option wins),
+# with 12 data-loader workers shared out. Each comes back as $OUT/RUN.tar (run.json, the log,
+# final.* when done, and the state shards while they keep the tar under 16 MiB): carry
+# `runs/RUN` and untar each into it (`tar -xf RUN.tar -C runs/RUN`). Common options start the
+# trainers, as for one run; without them a call only waits and copies.
 set -euo pipefail
-run=${1:?run name}; seconds=${2:?seconds to wait}; shift 2
+run=${1:?run name or @study file}; seconds=${2:?seconds to wait}; shift 2
 cd "$(dirname "$0")/.."
 start=$(date +%s)
 # AGNDC_PYTHON: a Python that has every dependency already (a dry run here, on the CPU)
@@ -34,8 +46,6 @@ alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }  # the process of 
 data=/tmp/agndc_data
 resolutions=${AGNDC_RESOLUTIONS:-32,128}
 train="$data/train_${resolutions/,/-}"
-work=/tmp/agndc_runs/$run
-pidfile=/tmp/agndc_runs/$run.pid
 mkdir -p /tmp/agndc_runs
 agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
@@ -55,31 +65,85 @@ if [ -n "${AGNDC_SMOKE:-}" ]; then
 print('step time', t['train_seconds'], 's, of which waiting for batches', t['data_wait_seconds'], 's')"
     exit 0
 fi
-if [ ! -f "$work/final.safetensors" ] && [ "$#" -gt 0 ] && ! alive "$pidfile"; then
+# the runs: RUN and its own options, one per line
+if [ "${run#@}" != "$run" ]; then
+    study=${run#@}
+    runs=$(grep -v '^\s*\(#\|$\)' "$study")
+else
+    study=
+    runs=$run
+fi
+count=$(printf '%s\n' "$runs" | wc -l)
+# 16 cores: 12 data-loader workers shared out, and the trainers' own threads
+workers=$(( 12 / count > 2 ? 12 / count : 2 ))
+threads=$(( count > 1 ? 2 : 4 ))
+# whether RUN still has to be started on this machine (not finished, not running)
+startable() {
+    [ ! -f "/tmp/agndc_runs/$1/final.safetensors" ] && ! alive "/tmp/agndc_runs/$1.pid"
+}
+# one run's folder, pid file and start: start_run RUN [options...]
+start_run() {
+    local name=$1 work=/tmp/agndc_runs/$1 pidfile=/tmp/agndc_runs/$1.pid
+    shift
+    startable "$name" || return 0
+    if [ ! -f "$work/run.json" ] && [ -d "runs/$name" ]; then
+        mkdir -p "$work" && cp -r "runs/$name"/. "$work"/
+    fi
+    mkdir -p "$work"
+    setsid nohup "$py" -m agndc_core.cli train --data "$train" --val "$data/val" \
+        -o "$work" --device cuda --workers "$workers" --threads "$threads" --resume "$@" \
+        >>"$work/train.log" 2>&1 </dev/null &
+    echo $! >"$pidfile"
+    echo "trainer $name started: pid $(cat "$pidfile")"
+}
+any_alive() {
+    local name
+    for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+        alive "/tmp/agndc_runs/$name.pid" && return 0
+    done
+    return 1
+}
+need=0
+for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+    if startable "$name"; then need=1; fi
+done
+if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$train" --resolutions "$resolutions" -n "${AGNDC_SAMPLES:-5000}" \
         --workers 16 2>/dev/null
     echo "data ready after $(( $(date +%s) - start )) s: $(ls "$train" | wc -l) samples"
-    if [ ! -f "$work/run.json" ] && [ -d "runs/$run" ]; then
-        mkdir -p "$work" && cp -r "runs/$run"/. "$work"/
-    fi
-    mkdir -p "$work"
-    setsid nohup "$py" -m agndc_core.cli train --data "$train" --val "$data/val" \
-        -o "$work" --device cuda --workers 12 --threads 4 --resume "$@" \
-        >>"$work/train.log" 2>&1 </dev/null &
-    echo $! >"$pidfile"
-    echo "trainer started: pid $(cat "$pidfile")"
+    while read -r name own; do
+        # word splitting of the study line's options is intended (no quoting inside a line)
+        # shellcheck disable=SC2086
+        start_run "$name" "$@" $own
+    done <<<"$runs"
 fi
-while [ $(( $(date +%s) - start )) -lt "$seconds" ] && alive "$pidfile"; do
+while [ $(( $(date +%s) - start )) -lt "$seconds" ] && any_alive; do
     sleep 5
 done
-if [ -n "${OUT:-}" ]; then
-    # run.json first: a save landing between the copies leaves weights newer than its step
-    cp "$work"/run.json "$OUT"/ 2>/dev/null || true
-    cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
-    cp "$work"/final.* "$OUT"/ 2>/dev/null || true
-fi
-alive "$pidfile" && echo "trainer running" || echo "trainer not running"
-# the log may not exist yet, or hold no line yet (grep then fails): neither is an error here
-[ -f "$work/train.log" ] && { tr '\r' '\n' <"$work/train.log" | grep -v '^\s*$' | tail -n 8 || true; }
+for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+    work=/tmp/agndc_runs/$name
+    [ -d "$work" ] || { echo "$name: no run folder"; continue; }
+    if [ -n "${OUT:-}" ] && [ -z "$study" ]; then
+        # run.json first: a save landing between the copies leaves weights newer than its step
+        cp "$work"/run.json "$OUT"/ 2>/dev/null || true
+        cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
+        cp "$work"/final.* "$OUT"/ 2>/dev/null || true
+    elif [ -n "${OUT:-}" ]; then
+        files=$(cd "$work" && ls run.json train.log final.* 2>/dev/null || true)
+        shards=$(cd "$work" && ls state-*.safetensors 2>/dev/null || true)
+        size=$(cd "$work" && du -cb $files $shards 2>/dev/null | tail -n 1 | cut -f1)
+        # the state only while it fits: a lost machine then resumes; final.* always comes
+        if [ "${size:-0}" -lt $(( 16 * 1024 * 1024 - 65536 )) ]; then
+            files="$files $shards"
+        fi
+        # shellcheck disable=SC2086
+        (cd "$work" && tar -cf "$OUT/$name.tar" $files)
+    fi
+    alive "/tmp/agndc_runs/$name.pid" && echo "$name: trainer running" \
+        || echo "$name: trainer not running"
+    # the log may not exist yet, or hold no line yet (grep then fails): neither is an error here
+    [ -f "$work/train.log" ] && { tr '\r' '\n' <"$work/train.log" | grep -v '^\s*$' \
+        | tail -n "$([ -n "$study" ] && echo 3 || echo 8)" || true; }
+done
 exit 0
