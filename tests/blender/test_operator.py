@@ -146,6 +146,22 @@ def test_agndc_closer_than_mc(addon):
     assert cd_agndc < cd_mc
 
 
+@needs_weights
+def test_remesh_keeps_the_source_dimensions(addon):
+    """docs/blender.md's promise: a slab comes back with its own bounding box (the faces that
+    bound it are put on it); marching cubes of the same grid is off by a fraction of a voxel."""
+    import trimesh
+
+    box = trimesh.creation.box((1.0, 0.613, 0.377))
+    add_object(addon.mesh_io, "Slab", box.vertices, box.faces)
+    assert _run(resolution=24, method="agndc", compare_mc=True, threads=1) == {"FINISHED"}
+    voxel = 1.0 / 22  # 24 voxels on the longest side, one empty voxel each end
+    for name, kept in (("Slab_AGNDC", True), ("Slab_MC", False)):
+        vertices, _ = _mesh(bpy.data.objects[name])  # the mesh in the source's own frame
+        error = np.abs(np.stack([vertices.min(0), vertices.max(0)]) - box.bounds).max() / voxel
+        assert error < 1e-4 if kept else error > 0.05, (name, error)
+
+
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tmp_path_factory):
     """An untrained small AGNDC network: exercises the learned path without shipped weights."""
