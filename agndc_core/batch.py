@@ -466,8 +466,8 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
         fmt: "ply", "obj", "stl" or "glb".
         method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
-            min_component_faces, threads, flat_patches, source_bounds): as for ``pipeline.remesh_file`` /
-            ``agndc remesh``.
+            min_component_faces, threads, flat_patches, source_bounds): as for
+            ``pipeline.remesh_file`` / ``agndc remesh``.
         workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
         engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).
         overwrite: redo outputs that are already there and up to date.

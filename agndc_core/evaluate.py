@@ -56,8 +56,8 @@ def parse_methods(text: str) -> list[str]:
     from .pipeline import BOUNDED_METHODS, METHODS
 
     methods = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [m for m in methods
-               if split_method(m)[0] not in (BOUNDED_METHODS if split_method(m)[1] else METHODS)]
+    unknown = [name for name, (base, bounded) in zip(methods, map(split_method, methods))
+               if base not in (BOUNDED_METHODS if bounded else METHODS)]
     if unknown:
         raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}, or "
                          + ", ".join(m + BOUNDS_SUFFIX for m in BOUNDED_METHODS))

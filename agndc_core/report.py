@@ -130,9 +130,9 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
     return "\n".join(lines)
 
 
-#: the sentences of ``_comparison``: AGNDC against each baseline given the same information
-COMPARISONS = (("agndc", ("mc", "surfacenets", "undc")),
-               ("agndc+bounds", ("surfacenets+bounds", "undc+bounds")))
+#: the sentences of ``_comparison``: (label, method, the baselines given the same information)
+COMPARISONS = (("AGNDC", "agndc", ("mc", "surfacenets", "undc")),
+               ("AGNDC+bounds", "agndc+bounds", ("surfacenets+bounds", "undc+bounds")))
 
 
 def _comparison(summaries) -> list[str]:
@@ -140,7 +140,7 @@ def _comparison(summaries) -> list[str]:
     by_method = {s["method"]: s for s in summaries}
     lower_is_better = {"cd", "ecd"}
     out = []
-    for method, bases in COMPARISONS:
+    for label, method, bases in COMPARISONS:
         for base in bases:
             if method not in by_method or base not in by_method:
                 continue
@@ -152,8 +152,7 @@ def _comparison(summaries) -> list[str]:
                 better = a < b if column in lower_is_better else a > b
                 parts.append(f"{column.upper()} {100 * (a - b) / abs(b):+.1f} % "
                              f"({'better' if better else 'worse'})")
-            out.append(f"{method.upper().replace('+BOUNDS', '+bounds')} against {base}: "
-                       + ", ".join(parts) + ".")
+            out.append(f"{label} against {base}: " + ", ".join(parts) + ".")
     return out + [""] if out else []
 
 

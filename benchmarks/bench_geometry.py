@@ -7,8 +7,8 @@ An axis-aligned box (flatness, and RMS from the true planes), the box rotated 20
 RMS, worst corner) and a sphere (radial RMS), errors in voxels; ``agndc_core/solids.py`` defines
 every number and holds the targets. The methods see the grid alone; ``--source-bounds`` also
 gives them the solid's bounding box (``remesh(source_bounds=True)``, what mesh input gets by
-default; marching cubes and its smoothing ignore it). Marching cubes is the time ratio's baseline, measured in the
-same run.
+default; marching cubes and its smoothing ignore it). Marching cubes is the time ratio's
+baseline, measured in the same run.
 """
 
 from __future__ import annotations

@@ -73,7 +73,8 @@ else
     study=
     runs=$run
 fi
-count=$(printf '%s\n' "$runs" | wc -l)
+names=$(printf '%s\n' "$runs" | awk '{print $1}')
+count=$(printf '%s\n' "$names" | wc -l)
 # 16 cores: 12 data-loader workers shared out, and the trainers' own threads
 workers=$(( 12 / count > 2 ? 12 / count : 2 ))
 threads=$(( count > 1 ? 2 : 4 ))
@@ -98,13 +99,13 @@ start_run() {
 }
 any_alive() {
     local name
-    for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+    for name in $names; do
         alive "/tmp/agndc_runs/$name.pid" && return 0
     done
     return 1
 }
 need=0
-for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+for name in $names; do
     if startable "$name"; then need=1; fi
 done
 if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
@@ -121,7 +122,7 @@ fi
 while [ $(( $(date +%s) - start )) -lt "$seconds" ] && any_alive; do
     sleep 5
 done
-for name in $(printf '%s\n' "$runs" | awk '{print $1}'); do
+for name in $names; do
     work=/tmp/agndc_runs/$name
     [ -d "$work" ] || { echo "$name: no run folder"; continue; }
     if [ -n "${OUT:-}" ] && [ -z "$study" ]; then
