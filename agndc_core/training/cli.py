@@ -44,6 +44,9 @@ def add_train_parser(sub) -> None:
                    "(default 0: off)")
     p.add_argument("--outside-crops", action="store_true", help="let crops reach past the "
                    "lattice's ends, so the empty space in front of a face varies")
+    p.add_argument("--random-phase", action="store_true", help="crops start at any point, "
+                   "not on window boundaries: the network sees parts at every phase of its "
+                   "pooling and attention windows")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)
@@ -89,7 +92,8 @@ def _cmd_train(args) -> int:
                       margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
                       workers=args.workers, init=args.init, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
-                      ema=args.ema, outside_crops=args.outside_crops)
+                      ema=args.ema, outside_crops=args.outside_crops,
+                      random_phase=args.random_phase)
     if args.quadric_floor is not None:
         cfg.quadric_floor = args.quadric_floor
     path = train(cfg, resume=args.resume)

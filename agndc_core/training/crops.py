@@ -201,8 +201,9 @@ class SparseSample:
     def window(self, s: int, lo, size) -> dict:
         """Dense scale-s arrays of the box ``lo .. lo + size`` (scale-s points).
 
-        ``lo`` must be a multiple of 2**(levels - s) so the pooled inputs line up with the
-        lattice's own pyramid. Returns {"grids": [G_s .. G_levels], "surface{s}",
+        The coarser inputs are pooled from the window itself: a ``lo`` that is a multiple of
+        2**(levels - s) gives the lattice's own pyramid, any other ``lo`` that of the part
+        moved by the difference (``TrainConfig.random_phase``). Returns {"grids": [G_s .. G_levels], "surface{s}",
         "vertex{s}", "edge{s}"} as ``make_crop`` reads them.
         """
         lo, size = np.asarray(lo), np.asarray(size)

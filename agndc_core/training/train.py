@@ -73,6 +73,10 @@ class TrainConfig:
     # crops may reach past the lattice's ends (``crops.random_crop_origin``): the empty space
     # in front of a face is no longer always the same 2 points
     outside_crops: bool = False
+    # crops may start at any point of their scale instead of on a window boundary: the part then
+    # meets the coarse scales' pooling and the attention windows at every phase, as a surface
+    # anywhere in a user's grid does (aligned crops show a part's low faces at one phase only)
+    random_phase: bool = False
 
 
 class Trainer:
@@ -427,11 +431,13 @@ def make_batch(cfg: TrainConfig, model_config, samples: list[SparseSample], s: i
     crops = []
     for i in rng.integers(len(samples), size=cfg.batch):
         sample = samples[i]
-        origin = random_crop_origin(sample.cells[s], size, align, rng, margin,
-                                    dims=sample.shapes[s], outside=cfg.outside_crops)
+        origin = random_crop_origin(sample.cells[s], size, 1 if cfg.random_phase else align,
+                                    rng, margin, dims=sample.shapes[s], outside=cfg.outside_crops)
         perm, flips = rng.permutation(3), rng.random(3) < 0.5
         # a dense window one alignment step larger on each side (make_crop reads one cell
-        # before the crop; alignment keeps the pooled inputs on the lattice's own pyramid)
+        # before the crop). The window pools its own coarser inputs: on the lattice's own
+        # pyramid for an aligned origin, else on the pyramid of the part moved by the phase,
+        # whose scale-s labels are the same cells' (tests/core/test_training.py)
         window = sample.window(s, np.asarray(origin) - align, [size + 2 * align] * 3)
         grids = [None] * s + window.pop("grids")
         crop = make_crop(window, grids, s, size, [align] * 3, perm, flips)

@@ -108,6 +108,64 @@ def test_sparse_sample_windows_give_the_dense_crops(data_dir, outside):
                 np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("s", [0, 1])
+def test_a_crop_at_any_phase_is_the_aligned_crop_of_the_moved_part(data_dir, s):
+    """``random_phase``: a crop starting between window boundaries is exactly the aligned crop
+    of the sample whose part was moved by that phase (every label, every pooled input)."""
+    levels = 2
+    sample = load_sample(sorted(data_dir.glob("*.npz"))[0])
+    sparse = SparseSample(sample, levels)
+    align = size = 4 * 2 ** (levels - s)
+    rng = np.random.default_rng(s)
+    for _ in range(4):
+        phase = rng.integers(1, align, size=3)
+        fine = phase * 2 ** s
+        extent = -(-np.add(sample["lattice"].shape, fine) // 2 ** levels) * 2 ** levels
+        moved = {"lattice": take(sample["lattice"], -fine, extent)}
+        for key in ("surface", "vertex", "edge", "quadric"):
+            arr = sample[f"{key}{s}"]
+            moved[f"{key}{s}"] = take(arr, -phase, np.add(arr.shape[:3], phase))
+        aligned = np.asarray(random_crop_origin(moved[f"surface{s}"], size, align, rng))
+        perm, flips = rng.permutation(3), rng.random(3) < 0.5
+        want = make_crop(moved, sample_pyramid(moved["lattice"], levels), s, size, aligned,
+                         perm, flips)
+        origin = aligned - phase  # the same cells in the sample's own lattice
+        window = sparse.window(s, origin - align, [size + 2 * align] * 3)
+        got = make_crop(window, [None] * s + window.pop("grids"), s, size, [align] * 3,
+                        perm, flips)
+        assert got["surface"].any()
+        for key in ("surface", "edge", "vertex", "quadric"):
+            np.testing.assert_array_equal(got[key], want[key])
+        for a, b in zip(got["g"], want["g"]):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_random_phase_batches_start_between_window_boundaries(data_dir, monkeypatch):
+    """The trainer draws unaligned origins only with ``random_phase``."""
+    origins = []
+
+    def spy(*args, **kwargs):
+        origin = random_crop_origin(*args, **kwargs)
+        origins.append(origin)
+        return origin
+
+    monkeypatch.setattr(train_module, "random_crop_origin", spy)
+    from agndc_core.nn import AGNDCConfig
+
+    model_config = AGNDCConfig(**TINY_MODEL)
+    samples = train_module._load_folder(str(data_dir), model_config.levels, 0)
+    align = model_config.window * 2 ** model_config.levels  # scale 0's window boundaries
+    for random_phase in (False, True):
+        cfg = TrainConfig(data=str(data_dir), out="unused", batch=4, crop=[16, 8, 4],
+                          random_phase=random_phase)
+        origins.clear()
+        for step in range(4):
+            batch = train_module.make_batch(cfg, model_config, samples, 0, step)
+            assert batch["surface"].any()
+        unaligned = [o for o in origins if any(x % align for x in o)]
+        assert bool(unaligned) == random_phase
+
+
 @pytest.mark.parametrize("seed", range(8))
 def test_valid_cells_follow_the_crop_through_flips(seed):
     """``valid_cells`` against the mask built in the lattice frame and pushed through
