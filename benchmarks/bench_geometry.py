@@ -37,7 +37,7 @@ def main() -> None:
 
     print(f"{args.res}³, errors in voxels; targets: "
           + ", ".join(f"{name} <= {value}" for name, value in TARGETS.items()))
-    print(f"{'method':12s} {'box flat':>9s} {'box RMS':>8s} {'rot RMS':>8s} {'corner':>7s} "
+    print(f"{'method':13s} {'box flat':>9s} {'box RMS':>8s} {'rot RMS':>8s} {'corner':>7s} "
           f"{'sphere':>7s} {'s':>6s}")
     baseline = None
     for method in METHODS:
@@ -45,10 +45,10 @@ def main() -> None:
             e = measure(method, args.res, checkpoint=checkpoints.get(method), threads=2,
                         flat_patches=args.flat_patches, source_bounds=args.source_bounds)
         except (AGNDCError, OSError) as exc:  # a missing checkpoint: report and go on
-            print(f"{method:12s} failed: {exc}")
+            print(f"{method:13s} failed: {exc}")
             continue
         baseline = e["seconds"] if baseline is None else baseline
-        print(f"{method:12s} {e['flatness']:9.3f} {e['box_rms']:8.3f} {e['rotated_rms']:8.3f} "
+        print(f"{method:13s} {e['flatness']:9.3f} {e['box_rms']:8.3f} {e['rotated_rms']:8.3f} "
               f"{e['corner']:7.3f} {e['sphere']:7.3f} {e['seconds']:6.2f}  "
               f"({e['seconds'] / baseline:.0f}x mc time)")
 
