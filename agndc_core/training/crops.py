@@ -203,8 +203,8 @@ class SparseSample:
 
         The coarser inputs are pooled from the window itself: a ``lo`` that is a multiple of
         2**(levels - s) gives the lattice's own pyramid, any other ``lo`` that of the part
-        moved by the difference (``TrainConfig.random_phase``). Returns {"grids": [G_s .. G_levels], "surface{s}",
-        "vertex{s}", "edge{s}"} as ``make_crop`` reads them.
+        moved by the difference (``TrainConfig.random_phase``). Returns {"grids": [G_s ..
+        G_levels], "surface{s}", "vertex{s}", "edge{s}"} as ``make_crop`` reads them.
         """
         lo, size = np.asarray(lo), np.asarray(size)
         k = 2 ** s
