@@ -221,12 +221,14 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
     vertices, faces, slots = mesh_io.read_mesh(obj, settings.use_modifiers, depsgraph)
     if len(faces) == 0:
         raise errors.MeshError(f"'{name}': the mesh has no faces, nothing to remesh")
-    if not np.all(np.isfinite(vertices)) or np.ptp(vertices, axis=0).max() <= 0:
+    surface = np.unique(faces)  # loose vertices are not part of the surface (as in voxelize)
+    if not np.all(np.isfinite(vertices[surface])) or np.ptp(vertices[surface], axis=0).max() <= 0:
         raise errors.MeshError(f"'{name}': the mesh has zero size or invalid coordinates")
     matrix = np.array(obj.matrix_world, dtype=np.float64)
     frame, world_per_unit = frame_of(matrix)
     vertices = vertices * frame
-    extent = np.ptp(vertices, axis=0) * world_per_unit  # world units, along the object's axes
+    used = vertices[surface]
+    extent = np.ptp(used, axis=0) * world_per_unit  # world units, along the object's axes
     grid = plan.plan_grid(extent, voxel_size=settings.voxel_size or None,
                           resolution=None if settings.voxel_size else settings.resolution,
                           source=f"'{name}'")
@@ -240,7 +242,7 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
         job.parent = obj.parent.name
         job.parent_inverse = np.array(obj.matrix_parent_inverse, dtype=np.float64)
     job.open_edges = plan.open_edge_count(vertices, faces)
-    if job.open_edges and plan.is_planar(vertices[np.unique(faces)]):
+    if job.open_edges and plan.is_planar(used):
         raise _open_surface_error(name)
     if job.open_edges:
         job.warnings.append(f"{name} is not closed ({job.open_edges:,} open edges): remeshed as "

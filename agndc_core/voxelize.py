@@ -47,16 +47,17 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     vertices, faces = check_mesh(vertices, faces, source)
     if not 2 * margin + 1 <= resolution <= 1024:
         raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], got {resolution}")
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    # the surface's own extent: vertices no face uses are not part of it (a stray or non-finite
+    # one must neither shrink the shape in its grid nor reach the arithmetic below)
+    used = vertices[np.unique(faces)]
+    lo, hi = used.min(axis=0), used.max(axis=0)
     voxel, counts = grid_layout(hi - lo, resolution, margin)
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
     origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
     occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule))
-    # the surface's own extent (vertices no face uses are not part of it)
-    used = vertices[np.unique(faces)]
-    bounds = np.stack([used.min(axis=0), used.max(axis=0)])
-    return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source, source_bounds=bounds)
+    return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source,
+                                  source_bounds=np.stack([lo, hi]))
 
 
 def grid_layout(extent, resolution: int, margin: int = 1) -> tuple[float, np.ndarray]:

@@ -99,6 +99,22 @@ def test_modifiers_are_applied_unless_asked_not_to(addon):
     assert [m.name for m in cube.modifiers] == ["Bevel"]
 
 
+def test_loose_vertices_do_not_change_the_grid(addon):
+    """A vertex no face uses (left over from modelling) is not part of the solid: the grid is
+    the one of the cube alone, and the remeshed cube keeps its size."""
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    cube = bpy.context.object
+    cube.data.vertices.add(1)
+    cube.data.vertices[-1].co = (40.0, -3.0, 7.0)
+    cube.data.update()
+    settings = addon.remesh.Settings(method="mc", voxel_size=0.1, compare_mc=False)
+    (job,) = addon.remesh.mesh_jobs([cube], settings)
+    assert job.shape == (22, 22, 22)
+    assert bpy.ops.object.agndc_remesh(method="mc", voxel_size=0.1) == {"FINISHED"}
+    lo, hi = mesh_world_bounds(bpy.data.objects["Cube_MC"])
+    assert np.allclose(hi - lo, 2.0, atol=0.1)
+
+
 @pytest.mark.parametrize("scale", [(2.0, 2.0, 2.0), (1.0, 2.0, 0.5)])
 def test_voxel_size_is_in_world_units(addon, scale):
     bpy.ops.mesh.primitive_cube_add(size=2.0)

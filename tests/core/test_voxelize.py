@@ -62,6 +62,16 @@ def test_bad_meshes_are_named(vertices, faces, message):
         voxelize(vertices, faces, 16)
 
 
+@pytest.mark.parametrize("stray", [(50.0, -3.0, 7.0), (np.nan, 0.0, np.inf)])
+def test_vertices_no_face_uses_are_ignored(stray):
+    mesh = box((1.0, 0.5, 0.3))
+    reference = voxelize(mesh.vertices, mesh.faces, 32)
+    grid = voxelize(np.vstack([mesh.vertices, stray]), mesh.faces, 32)
+    assert np.array_equal(grid.occupancy, reference.occupancy)
+    assert np.allclose(grid.affine, reference.affine)
+    assert np.allclose(grid.source_bounds, [[-0.5, -0.25, -0.15], [0.5, 0.25, 0.15]])
+
+
 def test_matches_trimesh_contains_on_a_small_grid():
     mesh = box(transform=rotation(0.3, [0, 1, 1]))
     grid = voxelize(mesh.vertices, mesh.faces, 20)
