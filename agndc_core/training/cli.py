@@ -46,7 +46,8 @@ def add_train_parser(sub) -> None:
                    "lattice's ends, so the empty space in front of a face varies")
     p.add_argument("--random-phase", action="store_true", help="crops start at any point, "
                    "not on window boundaries: the network sees parts at every phase of its "
-                   "pooling and attention windows")
+                   "pooling and attention windows (measured worse on the dev meshes: "
+                   "docs/training.md, cpu2)")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)

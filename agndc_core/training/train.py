@@ -75,7 +75,9 @@ class TrainConfig:
     outside_crops: bool = False
     # crops may start at any point of their scale instead of on a window boundary: the part then
     # meets the coarse scales' pooling and the attention windows at every phase, as a surface
-    # anywhere in a user's grid does (aligned crops show a part's low faces at one phase only)
+    # anywhere in a user's grid does (aligned crops show a part's low faces at one phase only).
+    # Off by default: measured worse on the dev meshes (docs/training.md, cpu2), since where an
+    # axis-aligned face lies in its voxel layer is tied to the grid's frame, a cue this hides
     random_phase: bool = False
 
 
