@@ -221,13 +221,12 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
     vertices, faces, slots = mesh_io.read_mesh(obj, settings.use_modifiers, depsgraph)
     if len(faces) == 0:
         raise errors.MeshError(f"'{name}': the mesh has no faces, nothing to remesh")
-    surface = np.unique(faces)  # loose vertices are not part of the surface (as in voxelize)
-    if not np.all(np.isfinite(vertices[surface])) or np.ptp(vertices[surface], axis=0).max() <= 0:
+    used = vertices[np.unique(faces)]  # loose vertices are not part of the surface (voxelize)
+    if not np.all(np.isfinite(used)) or np.ptp(used, axis=0).max() <= 0:
         raise errors.MeshError(f"'{name}': the mesh has zero size or invalid coordinates")
     matrix = np.array(obj.matrix_world, dtype=np.float64)
     frame, world_per_unit = frame_of(matrix)
-    vertices = vertices * frame
-    used = vertices[surface]
+    vertices, used = vertices * frame, used * frame
     extent = np.ptp(used, axis=0) * world_per_unit  # world units, along the object's axes
     grid = plan.plan_grid(extent, voxel_size=settings.voxel_size or None,
                           resolution=None if settings.voxel_size else settings.resolution,
