@@ -34,8 +34,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--init", help="warm start from this checkpoint (.safetensors)")
     p.add_argument("--max-minutes", type=float, help="save the state and stop after this much "
                    "wall time (continue with --resume): chunks on a time-limited GPU lease")
-    p.add_argument("--val-steps", default="", help="finest-scale steps after which the --val "
-                   "samples are scored (learning curve), e.g. 100,300,1000")
+    p.add_argument("--val-steps", default="", help="finest-scale steps after which a checkpoint "
+                   "step-NNNNNN.safetensors is written and the --val samples are scored (the "
+                   "points of a learning curve), e.g. 100,300,1000")
     p.add_argument("--quadric-floor", type=float, default=None, help="weight of the plain "
                    "squared vertex error beside the normal quadric (default 0.1; 1 pins "
                    "vertices to their labels like MSE)")

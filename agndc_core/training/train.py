@@ -58,7 +58,8 @@ class TrainConfig:
     # run; if it predicted absolute offsets (no surface nets prior), its vertex heads restart
     # at zero so the run starts exactly at surface nets
     init: str | None = None
-    # steps of the finest scale after which the held-out samples are scored (learning curve)
+    # steps of the finest scale after which a checkpoint ``step-NNNNNN`` of the (averaged)
+    # weights is written and the held-out samples are scored: the points of a learning curve
     val_steps: list = field(default_factory=list)
     # stop cleanly (state saved, ``--resume`` continues) once this much wall time has passed:
     # one call on a lent GPU machine is limited to 10 minutes; None = no limit
@@ -263,9 +264,8 @@ class Trainer:
                     self.log.append(entry)
                     bar.set_postfix(v=f"{entry['vertex']:.4f}", e=f"{entry['edge']:.4f}")
                     window = []
-                if s == 0 and self.step in self.cfg.val_steps and self.cfg.val:
-                    self.log.append({"scale": 0, "step": self.step,
-                                     "seconds": round(self.seconds, 1), "val": self.validate()})
+                if s == 0 and self.step in self.cfg.val_steps:
+                    self.snapshot()
                 if self.step % self.cfg.save_every == 0:
                     self.save_state()
                 if self.cfg.max_seconds and time.perf_counter() - started > self.cfg.max_seconds \
@@ -289,10 +289,24 @@ class Trainer:
             return validate_model(model, self.cfg.val, count=self.cfg.val_count,
                                   n_samples=self.cfg.val_samples)
 
-    def finish(self, metrics: dict) -> Path:
+    def snapshot(self) -> Path:
+        """A learning-curve point: the checkpoint of the finest scale's current step (its
+        averaged weights, as ``finish`` keeps), scored on the held-out samples if any. The
+        learning rate is still on the run's schedule, so a point of a long run is not what a
+        run of that many steps would end with."""
         from ..checkpoint import save_checkpoint
 
-        training = {
+        metrics = self.validate() if self.cfg.val else {}
+        self.log.append({"scale": 0, "step": self.step, "seconds": round(self.seconds, 1),
+                         "val": metrics})
+        with self.averaged() as model:
+            path = save_checkpoint(model.eval(), self.out / f"step-{self.step:06d}",
+                                   training=self.training_record(), metrics=metrics)
+        return path
+
+    def training_record(self) -> dict:
+        """What a checkpoint says about how it was trained (data, recipe, steps, hardware)."""
+        return {
             "recipe": "agndc_core.training (procedural shapes, training/data.py); finest scale: "
                       "correction to the surface nets vertex, no edge loss; loss only on cells "
                       "with `margin` points of real context; zero-initialised vertex heads and "
@@ -310,9 +324,14 @@ class Trainer:
             "data_wait_seconds": round(self.data_seconds, 1),
             "hardware": _hardware(self.device, self.cfg),
             "final_losses": [e for e in self.log if e["step"] == self.cfg.steps[e["scale"]]],
+            "steps_done": {"scale": self.scale, "step": self.step},
         }
-        path = save_checkpoint(self.model.eval(), self.out / "final", training=training,
-                               metrics=metrics)
+
+    def finish(self, metrics: dict) -> Path:
+        from ..checkpoint import save_checkpoint
+
+        path = save_checkpoint(self.model.eval(), self.out / "final",
+                               training=self.training_record(), metrics=metrics)
         self._write_run_json(done=True, metrics=metrics)
         return path
 

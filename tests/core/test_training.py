@@ -401,6 +401,26 @@ def test_checkpoint_keeps_the_average_and_resume_is_bit_exact(data_dir, tmp_path
     assert any(not torch.equal(whole[n], plain[n]) for n in whole if n.startswith("nets.0."))
 
 
+def test_learning_curve_steps_write_checkpoints_of_the_averaged_weights(data_dir, tmp_path):
+    """--val-steps 1,4 of a 4-step finest scale: two loadable checkpoints; the last one is the
+    final checkpoint (both keep the weight average), the first one has only the finest
+    scale's network behind it."""
+    from agndc_core.checkpoint import load_checkpoint
+
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.ema, cfg.val_steps = 0.5, [1, 4]
+    final = Trainer(cfg).run(progress=False)
+    assert sorted(p.name for p in (tmp_path / "run").glob("step-*.safetensors")) == \
+        ["step-000001.safetensors", "step-000004.safetensors"]
+    first, meta = load_checkpoint(tmp_path / "run" / "step-000001.safetensors")
+    last = load_checkpoint(tmp_path / "run" / "step-000004.safetensors")[0].state_dict()
+    final = load_checkpoint(final)[0].state_dict()
+    assert meta["training"]["steps_done"] == {"scale": 0, "step": 1}
+    for name, value in first.state_dict().items():
+        assert torch.equal(last[name], final[name]), name
+        assert torch.equal(value, final[name]) != name.startswith("nets.0."), name
+
+
 def test_time_budget_stops_cleanly_and_resume_finishes(data_dir, tmp_path):
     cfg = _config(data_dir, tmp_path / "run")
     cfg.max_seconds = 1e-9  # out of time after the first step

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# The learning-curve study of issue 11 (docs/training.md, "learning curve"): UNDC and AGNDC at
+# widths 16 and 32, trained from scratch on the same data with the same recipe, a checkpoint at
+# finest-scale steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3.
+# Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
+#   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=/work/data/v2_train
+# Optional: AGNDC_CURVE_MINUTES caps each training call (it stops cleanly; run again to go on).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+data=${1:?usage: learning_curve.sh DATA [RUNS]}
+runs=${2:-runs/curve}
+dev=${AGNDC_DEV:-../shared/data/dev}
+agndc=.venv/bin/agndc
+common=(--data "$data" --batch 4 --lr 1e-3 --seed 5 --quadric-floor 1.0 --outside-crops --threads 2)
+if [[ -n "${AGNDC_CURVE_MINUTES:-}" ]]; then common+=(--max-minutes "$AGNDC_CURVE_MINUTES"); fi
+
+train() {  # name, then the run's own arguments
+    local name=$1; shift
+    [[ -f $runs/$name/final.safetensors ]] && return 0
+    local again=()
+    [[ -f $runs/$name/run.json ]] && again=(--resume)
+    "$agndc" train -o "$runs/$name" "${common[@]}" "$@" "${again[@]}"
+    [[ -f $runs/$name/final.safetensors ]]  # stopped by the time cap: the caller stops too
+}
+
+score() {  # name, method: every checkpoint of the run on the dev meshes at 64^3
+    local name=$1 method=$2
+    for ckpt in "$runs/$name"/step-*.safetensors; do
+        local out=$runs/eval_${name}_$(basename "$ckpt" .safetensors)
+        [[ -f $out/rows.csv ]] && continue
+        "$agndc" eval "$dev" --methods "$method" --checkpoint "$method=$ckpt" --res 64 -o "$out"
+    done
+}
+
+undc_steps=(--steps 1000 --val-steps 10,30,100,300,1000)
+agndc_steps=(--steps 300,100,100 --val-steps 10,30,100,300)
+agndc_model='"snake_kernel": 5, "band_radius": 4'
+
+train undc16 --undc --model '{"width": 16}' "${undc_steps[@]}" || exit 0
+score undc16 undc
+train agndc16 --model "{\"width\": 16, $agndc_model}" "${agndc_steps[@]}" || exit 0
+score agndc16 agndc
+train undc32 --undc --model '{"width": 32}' "${undc_steps[@]}" || exit 0
+score undc32 undc
+train agndc32 --model "{\"width\": 32, $agndc_model}" "${agndc_steps[@]}" || exit 0
+score agndc32 agndc
+.venv/bin/python scripts/learning_curve_table.py "$runs"

@@ -1,0 +1,67 @@
+"""The learning-curve table of ``scripts/learning_curve.sh``: dev-mesh means per run and step.
+
+    python scripts/learning_curve_table.py RUNS [--reference docs/results_rows/rows.csv]
+
+Reads RUNS/eval_<run>_step-NNNNNN/rows.csv (64^3, grid alone) and prints one markdown row per
+(run, step) beside the reference methods of the same resolution from the reference rows
+(marching cubes, surface nets, MC + Taubin, the oracles), with the share of the MC→oracle
+headroom of CD and EF1. Step 0 of every run is surface nets: the runs start from zero vertex
+heads on the surface nets prior.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import re
+from pathlib import Path
+
+from agndc_core.evaluate import (METRIC_COLUMNS, headroom_shares, markdown_table,
+                                 summarize_rows)
+
+REFERENCE_METHODS = ("mc", "mc_taubin", "surfacenets", "oracle_binary", "oracle")
+
+
+def read_rows(path: Path, resolution: str = "64") -> list[dict]:
+    with open(path, newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if r["resolution"] == resolution]
+    for row in rows:
+        for column in METRIC_COLUMNS + ("seconds",):
+            row[column] = float(row[column]) if row[column] not in ("", None) else float("nan")
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", type=Path)
+    parser.add_argument("--reference", type=Path, default=Path("docs/results_rows/rows.csv"))
+    args = parser.parse_args()
+
+    rows = [r for r in read_rows(args.reference) if r["method"] in REFERENCE_METHODS]
+    names = {r["name"] for r in rows}
+    for folder in sorted(args.runs.glob("eval_*_step-*")):
+        match = re.fullmatch(r"eval_(.+)_step-(\d+)", folder.name)
+        if not (match and (folder / "rows.csv").exists()):
+            continue
+        run, step = match.group(1), int(match.group(2))
+        curve = read_rows(folder / "rows.csv")
+        missing = names - {r["name"] for r in curve}
+        if missing:  # a mean over other meshes would not compare
+            raise SystemExit(f"{folder}: no rows for {sorted(missing)}")
+        for r in curve:
+            r["method"] = f"{run} @ {step}"
+        rows += curve
+    summaries = summarize_rows(rows)
+    print(markdown_table(summaries))
+    print()
+    shares = headroom_shares(summaries)
+    print("| method | CD headroom | EF1 headroom |\n|---|---|---|")
+    for method, share in shares.items():
+        cells = [f"{round(share[c])} %" if math.isfinite(share[c]) else "–" for c in ("cd", "ef1")]
+        print(f"| {method} | " + " | ".join(cells) + " |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
