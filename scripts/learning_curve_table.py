@@ -4,7 +4,7 @@
 
 Reads RUNS/eval_<run>_step-NNNNNN/rows.csv (64^3, grid alone) and prints one markdown row per
 (run, step) beside the reference methods of the same resolution from the reference rows
-(marching cubes, surface nets, MC + Taubin, the oracles), with the share of the MC→oracle
+(marching cubes, surface nets, MC + Taubin, the oracles, the shipped networks), with the share of the MC→oracle
 headroom of CD and EF1. Step 0 of every run is surface nets: the runs start from zero vertex
 heads on the surface nets prior.
 """
@@ -21,6 +21,8 @@ from agndc_core.evaluate import (METRIC_COLUMNS, headroom_shares, markdown_table
                                  summarize_rows)
 
 REFERENCE_METHODS = ("mc", "mc_taubin", "surfacenets", "oracle_binary", "oracle")
+#: the shipped networks, the end of long warm-started lineages, for scale
+SHIPPED_METHODS = ("undc", "agndc")
 
 
 def read_rows(path: Path, resolution: str = "64") -> list[dict]:
@@ -32,13 +34,31 @@ def read_rows(path: Path, resolution: str = "64") -> list[dict]:
     return rows
 
 
+def category_table(rows: list[dict]) -> str:
+    """CD×10⁵ and EF1 per mesh category and method: where a mean's change comes from."""
+    summaries = summarize_rows(rows, by=("method", "category"))
+    categories = sorted({s["category"] for s in summaries})
+    cell = {(s["method"], s["category"]): s for s in summaries}
+    methods = list(dict.fromkeys(s["method"] for s in summaries))
+    head = ["method"] + [f"{c} CD×10⁵ / EF1" for c in categories]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for m in methods:
+        cells = [f"{cell[m, c]['cd'] * 1e5:.3f} / {cell[m, c]['ef1']:.3f}" for c in categories]
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path)
     parser.add_argument("--reference", type=Path, default=Path("docs/results_rows/rows.csv"))
     args = parser.parse_args()
 
-    rows = [r for r in read_rows(args.reference) if r["method"] in REFERENCE_METHODS]
+    rows = [r for r in read_rows(args.reference)
+            if r["method"] in REFERENCE_METHODS + SHIPPED_METHODS]
+    for r in rows:
+        if r["method"] in SHIPPED_METHODS:
+            r["method"] += " (shipped)"
     names = {r["name"] for r in rows}
     for folder in sorted(args.runs.glob("eval_*_step-*")):
         match = re.fullmatch(r"eval_(.+)_step-(\d+)", folder.name)
@@ -54,6 +74,8 @@ def main() -> int:
         rows += curve
     summaries = summarize_rows(rows)
     print(markdown_table(summaries))
+    print()
+    print(category_table(rows))
     print()
     shares = headroom_shares(summaries)
     print("| method | CD headroom | EF1 headroom |\n|---|---|---|")
