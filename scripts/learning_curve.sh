@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The learning-curve study of issue 11 (docs/training.md, "learning curve"): UNDC and AGNDC at
+# The learning-curve study of issue 11 (docs/training.md, "the learning-curve study"): UNDC and AGNDC at
 # widths 16 and 32, trained from scratch on the same data with the same recipe, a checkpoint at
 # finest-scale steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3;
 # then UNDC 16 for 3,000 steps (what a 3x longer run buys). AGNDC at width 32 comes last: at

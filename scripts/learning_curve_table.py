@@ -4,9 +4,9 @@
 
 Reads RUNS/eval_<run>_step-NNNNNN/rows.csv (64^3, grid alone) and prints one markdown row per
 (run, step) beside the reference methods of the same resolution from the reference rows
-(marching cubes, surface nets, MC + Taubin, the oracles, the shipped networks), with the share of the MC→oracle
-headroom of CD and EF1. Step 0 of every run is surface nets: the runs start from zero vertex
-heads on the surface nets prior.
+(marching cubes, surface nets, MC + Taubin, the oracles, the shipped networks), a table per
+mesh category, and the share of the MC→oracle headroom of CD and EF1. Step 0 of every run is
+surface nets: the runs start from zero vertex heads on the surface nets prior.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import math
 import re
 from pathlib import Path
 
-from agndc_core.evaluate import (METRIC_COLUMNS, headroom_shares, markdown_table,
-                                 summarize_rows)
+from agndc_core.evaluate import (HEADROOM_COLUMNS, METRIC_COLUMNS, headroom_shares,
+                                 markdown_table, summarize_rows)
+from agndc_core.metrics import REPORT_SCALE
 
 REFERENCE_METHODS = ("mc", "mc_taubin", "surfacenets", "oracle_binary", "oracle")
 #: the shipped networks, the end of long warm-started lineages, for scale
@@ -43,7 +44,8 @@ def category_table(rows: list[dict]) -> str:
     head = ["method"] + [f"{c} CD×10⁵ / EF1" for c in categories]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for m in methods:
-        cells = [f"{cell[m, c]['cd'] * 1e5:.3f} / {cell[m, c]['ef1']:.3f}" for c in categories]
+        cells = [f"{cell[m, c]['cd'] * REPORT_SCALE['cd']:.3f} / {cell[m, c]['ef1']:.3f}"
+                 for c in categories]
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -78,9 +80,11 @@ def main() -> int:
     print(category_table(rows))
     print()
     shares = headroom_shares(summaries)
-    print("| method | CD headroom | EF1 headroom |\n|---|---|---|")
+    print("| method | " + " | ".join(f"{c.upper()} headroom" for c in HEADROOM_COLUMNS) + " |")
+    print("|---|" + "---|" * len(HEADROOM_COLUMNS))
     for method, share in shares.items():
-        cells = [f"{round(share[c])} %" if math.isfinite(share[c]) else "–" for c in ("cd", "ef1")]
+        cells = [f"{round(share[c])} %" if math.isfinite(share[c]) else "–"
+                 for c in HEADROOM_COLUMNS]
         print(f"| {method} | " + " | ".join(cells) + " |")
     return 0
 
