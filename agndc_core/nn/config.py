@@ -131,6 +131,10 @@ def _check(ok: bool, name: str, value, want: str) -> None:
         raise ModelError(f"model config {name}={value!r} is invalid: must be {want}")
 
 
+# the fields the paper's ablations (Tables 4-5) switch; a variant differs from AGNDC only here
+ABLATION_KEYS = ("levels", "use_attention", "use_snake", "use_dffm", "use_crpm")
+
+
 def undc_baseline(width: int = 64) -> AGNDCConfig:
     """Paper Table 4, first row: one scale, plain 3x3x3 convs, no attention, no fusion."""
     return AGNDCConfig(width=width, levels=0, use_attention=False, use_snake=False,

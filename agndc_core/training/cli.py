@@ -32,6 +32,10 @@ def add_train_parser(sub) -> None:
     p.add_argument("--no-amp", action="store_true", help="no bf16 autocast on CUDA")
     p.add_argument("--workers", type=int, default=0, help="data-loader processes building crops")
     p.add_argument("--init", help="warm start from this checkpoint (.safetensors)")
+    p.add_argument("--init-matching", action="store_true", help="--init may differ from "
+                   "--model in the ablation switches (levels, use_attention, use_snake, "
+                   "use_dffm, use_crpm): load the tensors whose name and shape agree, start "
+                   "the rest fresh (an ablation started from the full model)")
     p.add_argument("--max-minutes", type=float, help="save the state and stop after this much "
                    "wall time (continue with --resume): chunks on a time-limited GPU lease")
     p.add_argument("--val-steps", default="", help="finest-scale steps after which a checkpoint "
@@ -92,7 +96,8 @@ def _cmd_train(args) -> int:
                       else None, model=model, steps=_ints(args.steps), crop=_ints(args.crop),
                       batch=args.batch, lr=args.lr, seed=args.seed, threads=args.threads,
                       margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
-                      workers=args.workers, init=args.init, val_steps=_ints(args.val_steps),
+                      workers=args.workers, init=args.init,
+                      init_matching=args.init_matching, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
                       ema=args.ema, outside_crops=args.outside_crops,
                       random_phase=args.random_phase)

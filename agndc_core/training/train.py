@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from ..errors import AGNDCError
+from ..nn.config import ABLATION_KEYS
 from ..nn.loss import QUADRIC_FLOOR
 from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
@@ -58,6 +59,11 @@ class TrainConfig:
     # run; if it predicted absolute offsets (no surface nets prior), its vertex heads restart
     # at zero so the run starts exactly at surface nets
     init: str | None = None
+    # the ``init`` checkpoint may differ from the model in the ablation switches (ABLATION_KEYS):
+    # every tensor whose name and shape agree is loaded, the rest start fresh. Starts an
+    # ablation of Table 4 from the trained full model (docs/training.md); off by default, so a
+    # mistyped --model never silently drops half a warm start
+    init_matching: bool = False
     # steps of the finest scale after which a checkpoint ``step-NNNNNN`` of the (averaged)
     # weights is written and the held-out samples are scored: the points of a learning curve
     val_steps: list = field(default_factory=list)
@@ -104,6 +110,8 @@ class Trainer:
         self.losses = torch.nn.ModuleList([
             AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor)
             for s in range(levels + 1)]).to(self.device)
+        # what an --init-matching warm start loaded (None: a whole checkpoint, or none)
+        self.warm_start: dict | None = None
         if cfg.init:
             self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels, cfg.workers)
@@ -122,9 +130,20 @@ class Trainer:
         mine, theirs = self.model_config.to_dict(), source.config.to_dict()
         differ = sorted(k for k in mine if k not in ("surface_nets_prior", "band_radius")
                         and mine[k] != theirs.get(k))
+        ablation = set(differ) <= set(ABLATION_KEYS)
+        if differ and not (ablation and self.cfg.init_matching):
+            hint = (" (switches of an ablation: --init-matching loads the tensors the two "
+                    "share)" if ablation else "")
+            raise AGNDCError(f"--init {path}: its architecture differs in "
+                             f"{', '.join(differ)}{hint}")
         if differ:
-            raise AGNDCError(f"--init {path}: its architecture differs in {', '.join(differ)}")
-        self.model.load_state_dict(source.state_dict())
+            self.warm_start = _load_matching(self.model, source.state_dict())
+            self.warm_start["checkpoint"] = str(path)
+            print(f"warm start from {path}: {self.warm_start['loaded']} tensors loaded; "
+                  f"fresh: {', '.join(self.warm_start['fresh']) or 'none'}; "
+                  f"dropped: {', '.join(self.warm_start['dropped']) or 'none'}")
+        else:
+            self.model.load_state_dict(source.state_dict())
         if self.model_config.surface_nets_prior and not source.config.surface_nets_prior:
             self.model._init_outputs(self.model.nets[0], snakes=False)
 
@@ -325,6 +344,7 @@ class Trainer:
             "hardware": _hardware(self.device, self.cfg),
             "final_losses": [e for e in self.log if e["step"] == self.cfg.steps[e["scale"]]],
             "steps_done": {"scale": self.scale, "step": self.step},
+            **({"warm_start": self.warm_start} if self.warm_start else {}),
         }
 
     def finish(self, metrics: dict) -> Path:
@@ -391,6 +411,20 @@ class Trainer:
             self.optimizer.load_state_dict({"state": opt_state,
                                             "param_groups": info["param_groups"]})
         return True
+
+
+def _load_matching(model: torch.nn.Module, source: dict) -> dict:
+    """Copy into ``model`` every tensor of ``source`` with the same name and shape; what was
+    loaded, and the modules (``nets.S.module``) that start fresh or are left out."""
+    target = model.state_dict()
+    shared = {k: v for k, v in source.items() if k in target and target[k].shape == v.shape}
+    model.load_state_dict(shared, strict=False)
+
+    def modules(names):
+        return sorted({".".join(n.split(".")[:3]) for n in names})
+
+    return {"loaded": len(shared), "fresh": modules(set(target) - set(shared)),
+            "dropped": modules(set(source) - set(shared))}
 
 
 def _hardware(device: torch.device, cfg: TrainConfig) -> str:

@@ -302,6 +302,53 @@ def test_warm_start_from_a_checkpoint_without_the_prior(data_dir, tmp_path):
     torch.testing.assert_close(new.nets[1].fdm.convs[0].weight, old.nets[1].fdm.convs[0].weight)
 
 
+def test_an_ablation_warm_starts_from_the_full_model_only_when_asked(data_dir, tmp_path):
+    """--init-matching: a Table 4 variant takes every tensor it shares with the full model by
+    name and shape and starts the rest fresh; without the flag, or when more than the ablation
+    switches differ, the checkpoint is refused naming the fields."""
+    from agndc_core.checkpoint import save_checkpoint
+    from agndc_core.errors import AGNDCError
+    from agndc_core.nn import AGNDCCascade, AGNDCConfig
+
+    torch.manual_seed(6)
+    full = AGNDCCascade(AGNDCConfig(**TINY_MODEL))
+    for p in full.parameters():
+        p.data.normal_()
+    path = save_checkpoint(full, tmp_path / "full", training={}, metrics={})
+    theirs = full.state_dict()
+
+    def start(name, steps=(4, 3, 3), matching=True, **switches):
+        cfg = _config(data_dir, tmp_path / name, steps)
+        cfg.model = {**TINY_MODEL, **switches}
+        cfg.init, cfg.init_matching = str(path), matching
+        return Trainer(cfg)
+
+    with pytest.raises(AGNDCError, match=r"levels.*--init-matching"):
+        start("refused", steps=(4,), matching=False, levels=0)
+    with pytest.raises(AGNDCError, match="width") as refused:
+        start("wider", width=12)
+    assert "--init-matching" not in str(refused.value)
+
+    # +GDFEM (one scale): the finest scale's GDFEM and FDM, nothing fresh
+    one_scale = start("one_scale", steps=(4,), levels=0)
+    assert one_scale.warm_start["fresh"] == []
+    assert one_scale.warm_start["dropped"] == ["nets.0.crpm", "nets.0.dffm", "nets.1.crpm",
+                                               "nets.1.dffm", "nets.1.fdm", "nets.1.gdfem",
+                                               "nets.2.fdm", "nets.2.gdfem"]
+    for name, value in one_scale.model.state_dict().items():
+        torch.testing.assert_close(value, theirs[name])
+    # without attention the snakes' input loses the attention channel: they start fresh
+    no_lwsa = start("no_lwsa", use_attention=False)
+    assert no_lwsa.warm_start["fresh"] == [f"nets.{s}.gdfem" for s in range(3)]
+    mine = no_lwsa.model.state_dict()
+    torch.testing.assert_close(mine["nets.0.gdfem.convs.2.weight"],
+                               theirs["nets.0.gdfem.convs.2.weight"])
+    assert mine["nets.0.gdfem.dynamic.0.fuse.weight"].shape != \
+        theirs["nets.0.gdfem.dynamic.0.fuse.weight"].shape
+    record = no_lwsa.training_record()["warm_start"]
+    assert record["checkpoint"] == str(path) and record["loaded"] < len(theirs)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_quadric_transform_keeps_the_error_measure(seed):
     """A flip negates a displacement's component, a permutation reorders it; the quadric must
