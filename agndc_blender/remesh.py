@@ -32,7 +32,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import mesh_io
-from ._core import errors, gridio, metrics, pipeline, plan
+from ._core import errors, gridio, metrics, pipeline, plan, voxelize
 
 #: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
@@ -219,11 +219,7 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
         raise errors.MeshError(f"Select a mesh object to remesh ({kind})")
     name = obj.name
     vertices, faces, slots = mesh_io.read_mesh(obj, settings.use_modifiers, depsgraph)
-    if len(faces) == 0:
-        raise errors.MeshError(f"'{name}': the mesh has no faces, nothing to remesh")
-    used = vertices[np.unique(faces)]  # loose vertices are not part of the surface (voxelize)
-    if not np.all(np.isfinite(used)) or np.ptp(used, axis=0).max() <= 0:
-        raise errors.MeshError(f"'{name}': the mesh has zero size or invalid coordinates")
+    vertices, faces, used = voxelize.checked_surface(vertices, faces, source=f"'{name}'")
     matrix = np.array(obj.matrix_world, dtype=np.float64)
     frame, world_per_unit = frame_of(matrix)
     vertices, used = vertices * frame, used * frame

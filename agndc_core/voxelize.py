@@ -44,12 +44,10 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
         VoxelGrid whose voxel centres are the sample points; voxel size is the same on all axes;
         its ``source_bounds`` is the mesh's bounding box.
     """
-    vertices, faces = check_mesh(vertices, faces, source)
+    vertices, faces, used = checked_surface(vertices, faces, source)
     if not 2 * margin + 1 <= resolution <= 1024:
         raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], got {resolution}")
-    # the surface's own extent: vertices no face uses are not part of it (a stray or non-finite
-    # one must neither shrink the shape in its grid nor reach the arithmetic below)
-    used = vertices[np.unique(faces)]
+    # the surface's own extent (a stray vertex must not shrink the shape in its grid)
     lo, hi = used.min(axis=0), used.max(axis=0)
     voxel, counts = grid_layout(hi - lo, resolution, margin)
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
@@ -74,6 +72,14 @@ def grid_layout(extent, resolution: int, margin: int = 1) -> tuple[float, np.nda
 
 def check_mesh(vertices, faces, source: str = "mesh") -> tuple[np.ndarray, np.ndarray]:
     """Validate and convert a mesh: (V, 3) float64 and (F, 3) int64; MeshError names the problem."""
+    vertices, faces, _ = checked_surface(vertices, faces, source)
+    return vertices, faces
+
+
+def checked_surface(vertices, faces, source: str = "mesh"):
+    """``check_mesh``, plus the (U, 3) vertices some face uses: the surface's own points (a
+    loose vertex is not part of it, so a stray or non-finite one neither sets the extent nor
+    fails the check)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces)
     if vertices.ndim != 2 or vertices.shape[1] != 3:
@@ -89,7 +95,7 @@ def check_mesh(vertices, faces, source: str = "mesh") -> tuple[np.ndarray, np.nd
         raise MeshError(f"{source}: the mesh has non-finite vertex coordinates")
     if np.ptp(used, axis=0).max() <= 0:
         raise MeshError(f"{source}: the mesh has zero extent (all vertices coincide)")
-    return vertices, faces.astype(np.int64)
+    return vertices, faces.astype(np.int64), used
 
 
 def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
