@@ -297,16 +297,20 @@ class Trainer:
                 self._load_net(s, self.ema)
                 self.ema = self._start_ema(s)
             self.save_state()
-        metrics = self.validate() if self.cfg.val else {}
-        return self.finish(metrics)
+        return self.finish(self.validate())
 
     def validate(self) -> dict:
+        """CD/F1/... of the averaged weights on the held-out samples ({} without ``cfg.val``)."""
+        with self.averaged() as model:
+            return self._validate(model)
+
+    def _validate(self, model) -> dict:
         from .validate import validate_model
 
-        with self.averaged() as model:
-            model.eval()
-            return validate_model(model, self.cfg.val, count=self.cfg.val_count,
-                                  n_samples=self.cfg.val_samples)
+        if not self.cfg.val:
+            return {}
+        return validate_model(model.eval(), self.cfg.val, count=self.cfg.val_count,
+                              n_samples=self.cfg.val_samples)
 
     def snapshot(self) -> Path:
         """A learning-curve point: the checkpoint of the finest scale's current step (its
@@ -315,13 +319,12 @@ class Trainer:
         run of that many steps would end with."""
         from ..checkpoint import save_checkpoint
 
-        metrics = self.validate() if self.cfg.val else {}
-        self.log.append({"scale": 0, "step": self.step, "seconds": round(self.seconds, 1),
-                         "val": metrics})
         with self.averaged() as model:
-            path = save_checkpoint(model.eval(), self.out / f"step-{self.step:06d}",
+            metrics = self._validate(model)
+            self.log.append({"scale": 0, "step": self.step, "seconds": round(self.seconds, 1),
+                             "val": metrics})
+            return save_checkpoint(model.eval(), self.out / f"step-{self.step:06d}",
                                    training=self.training_record(), metrics=metrics)
-        return path
 
     def training_record(self) -> dict:
         """What a checkpoint says about how it was trained (data, recipe, steps, hardware)."""
