@@ -73,8 +73,24 @@ def binary_oracle_vertex(labels: ScaleLabels, midpoints: np.ndarray) -> np.ndarr
     """
     if labels.quadric is None:
         raise ValueError("binary_oracle_vertex needs labels with normal quadrics")
-    axis_aligned = labels.quadric[..., :3] > tol.axis_aligned  # (D, 3): face normal along axis
-    return np.where(axis_aligned, midpoints, labels.vertex).astype(np.float32)
+    return binary_visible_vertex(labels.vertex, labels.quadric, midpoints)
+
+
+def binary_visible_vertex(vertex: np.ndarray, quadric: np.ndarray,
+                          midpoints: np.ndarray) -> np.ndarray:
+    """The rule of ``binary_oracle_vertex`` on plain arrays (also the trainer's
+    ``--binary-targets``): where a cell's surface is exactly axis-aligned (its normal quadric's
+    diagonal entry above ``tol.axis_aligned``) the coordinate along that axis is the midpoint's.
+
+    Args:
+        vertex: (..., 3) offsets; quadric: (..., 6) normal quadrics (``QUADRIC_ENTRIES``
+            order); midpoints: (..., 3) surface nets offsets of the same cells.
+
+    Returns:
+        (..., 3) float32 offsets.
+    """
+    axis_aligned = quadric[..., :3] > tol.axis_aligned  # (..., 3): face normal along axis
+    return np.where(axis_aligned, midpoints, vertex).astype(np.float32)
 
 
 def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[ScaleLabels]:

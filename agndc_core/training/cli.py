@@ -53,6 +53,9 @@ def add_train_parser(sub) -> None:
                    "not on window boundaries: the network sees parts at every phase of its "
                    "pooling and attention windows (measured worse on the dev meshes: "
                    "docs/training.md, cpu2)")
+    p.add_argument("--binary-targets", action="store_true", help="finest scale: on exactly "
+                   "axis-aligned faces train towards the layer's midpoint (the oracle_binary "
+                   "vertex), not the depth the grid cannot show")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)
@@ -100,7 +103,7 @@ def _cmd_train(args) -> int:
                       init_matching=args.init_matching, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
                       ema=args.ema, outside_crops=args.outside_crops,
-                      random_phase=args.random_phase)
+                      random_phase=args.random_phase, binary_targets=args.binary_targets)
     if args.quadric_floor is not None:
         cfg.quadric_floor = args.quadric_floor
     path = train(cfg, resume=args.resume)

@@ -23,8 +23,10 @@ import numpy as np
 import torch
 
 from ..errors import AGNDCError
+from ..labels import binary_visible_vertex
 from ..nn.config import ABLATION_KEYS
 from ..nn.loss import QUADRIC_FLOOR
+from ..surfacenets import surface_nets_lattice
 from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
 
@@ -86,6 +88,12 @@ class TrainConfig:
     # Off by default: measured worse on the dev meshes (docs/training.md, cpu2), since where an
     # axis-aligned face lies in its voxel layer is tied to the grid's frame, a cue this hides
     random_phase: bool = False
+    # the finest scale learns what the grid can tell: on cells of exactly axis-aligned faces the
+    # target's coordinate along the normal is the layer's midpoint (``labels.binary_visible_vertex``,
+    # the ``oracle_binary`` vertex), not the true depth. Every depth in the layer leaves the same
+    # voxels, so the true depth is noise the network cannot predict; it dominates the loss and
+    # its gradient, and the network fits spurious cues to it (docs/training.md)
+    binary_targets: bool = False
 
 
 class Trainer:
@@ -500,6 +508,9 @@ def make_batch(cfg: TrainConfig, model_config, samples: list[SparseSample], s: i
         grids = [None] * s + window.pop("grids")
         crop = make_crop(window, grids, s, size, [align] * 3, perm, flips)
         crop["valid"] = valid_cells(origin, size, sample.shapes[s], margin, perm, flips)
+        if cfg.binary_targets and s == 0 and "quadric" in crop:
+            crop["vertex"] = binary_visible_vertex(crop["vertex"], crop["quadric"],
+                                                   surface_nets_lattice(crop["g"][0]))
         crops.append(crop)
     out = {"g": [torch.from_numpy(np.stack([c["g"][k] for c in crops]))
                  for k in range(len(crops[0]["g"]))]}

@@ -192,6 +192,40 @@ def test_valid_cells_follow_the_crop_through_flips(seed):
     assert 0 < valid.sum() < size**3
 
 
+def test_binary_targets_replace_only_the_depth_the_grid_cannot_show(data_dir):
+    """``binary_targets``: on exactly axis-aligned surface cells of scale 0 the target's
+    coordinate along the normal becomes the surface nets midpoint; nothing else changes (the
+    other coordinates, other cells, the inputs, the coarser scales)."""
+    from agndc_core.nn import AGNDCConfig
+    from agndc_core.surfacenets import surface_nets_lattice
+    from agndc_core.tolerances import tol
+
+    model_config = AGNDCConfig(**TINY_MODEL)
+    samples = train_module._load_folder(str(data_dir), model_config.levels, 0)
+    plain = TrainConfig(data=str(data_dir), out="unused", batch=4, crop=[16, 8, 4])
+    binary = TrainConfig(**{**plain.__dict__, "binary_targets": True})
+    changed = 0
+    for step in range(6):
+        a = train_module.make_batch(plain, model_config, samples, 0, step)
+        b = train_module.make_batch(binary, model_config, samples, 0, step)
+        for key in ("surface", "valid", "quadric", "edge"):
+            assert torch.equal(a[key], b[key])
+        assert all(torch.equal(x, y) for x, y in zip(a["g"], b["g"]))
+        aligned = (a["quadric"][..., :3] > tol.axis_aligned) & a["surface"][..., None]
+        midpoints = torch.stack([torch.from_numpy(surface_nets_lattice(g.numpy()))
+                                 for g in a["g"][0]])
+        assert torch.equal(b["vertex"][aligned], midpoints[aligned])
+        assert torch.equal(b["vertex"][~aligned], a["vertex"][~aligned])
+        # a flat voxel face splits its cells purely: the midpoint is the layer's middle (bar a
+        # cell a perpendicular face barely enters, below the quadric's tolerance)
+        middle = b["vertex"][aligned] == 0.5
+        assert middle.float().mean() > 0.99 if middle.numel() else True
+        changed += int((b["vertex"] != a["vertex"]).sum())
+    assert changed > 100  # the fixture has an axis-aligned part whose faces lie off-centre
+    coarse = [train_module.make_batch(c, model_config, samples, 1, 0) for c in (plain, binary)]
+    assert torch.equal(coarse[0]["vertex"], coarse[1]["vertex"])
+
+
 def _config(data_dir, out, steps=(4, 3, 3)):
     return TrainConfig(data=str(data_dir), out=str(out), model=TINY_MODEL, steps=list(steps),
                        batch=2, crop=16, margin=[2, 2, 0], lr=3e-3, warmup=2, log_every=1,
