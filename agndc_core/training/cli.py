@@ -55,7 +55,8 @@ def add_train_parser(sub) -> None:
                    "docs/training.md, cpu2)")
     p.add_argument("--binary-targets", action="store_true", help="finest scale: on exactly "
                    "axis-aligned faces train towards the layer's midpoint (the oracle_binary "
-                   "vertex), not the depth the grid cannot show")
+                   "vertex), not the true depth (from scratch: better at equal steps; continuing "
+                   "a trained network: worse CD; docs/training.md)")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)

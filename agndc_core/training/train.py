@@ -88,11 +88,13 @@ class TrainConfig:
     # Off by default: measured worse on the dev meshes (docs/training.md, cpu2), since where an
     # axis-aligned face lies in its voxel layer is tied to the grid's frame, a cue this hides
     random_phase: bool = False
-    # the finest scale learns what the grid can tell: on cells of exactly axis-aligned faces the
-    # target's coordinate along the normal is the layer's midpoint (``labels.binary_visible_vertex``,
-    # the ``oracle_binary`` vertex), not the true depth. Every depth in the layer leaves the same
-    # voxels, so the true depth is noise the network cannot predict; it dominates the loss and
-    # its gradient, and the network fits spurious cues to it (docs/training.md)
+    # on cells of exactly axis-aligned faces the finest scale's target coordinate along the
+    # normal is the layer's midpoint (``labels.binary_visible_vertex``, the ``oracle_binary``
+    # vertex), not the true depth: every depth in the layer leaves the same voxels there, so
+    # the true one is mostly noise to the network. Measured (docs/training.md, seventh session
+    # of 2026-11-25): from scratch better on all five dev metrics at equal steps; continuing a
+    # trained network with it loses CD, since a face's neighbours can pin its depth and this
+    # forbids learning that. Off by default
     binary_targets: bool = False
 
 
