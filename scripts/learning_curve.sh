@@ -12,27 +12,10 @@ cd "$(dirname "$0")/.."
 data=${1:?usage: learning_curve.sh DATA [RUNS]}
 runs=${2:-runs/curve}
 dev=${AGNDC_DEV:-../shared/data/dev}
-agndc=.venv/bin/agndc
 common=(--data "$data" --batch 4 --lr 1e-3 --seed 5 --quadric-floor 1.0 --outside-crops --threads 2)
 if [[ -n "${AGNDC_CURVE_MINUTES:-}" ]]; then common+=(--max-minutes "$AGNDC_CURVE_MINUTES"); fi
 
-train() {  # name, then the run's own arguments
-    local name=$1; shift
-    [[ -f $runs/$name/final.safetensors ]] && return 0
-    local again=()
-    [[ -f $runs/$name/run.json ]] && again=(--resume)
-    "$agndc" train -o "$runs/$name" "${common[@]}" "$@" "${again[@]}"
-    [[ -f $runs/$name/final.safetensors ]]  # stopped by the time cap: the caller stops too
-}
-
-score() {  # name, method: every checkpoint of the run on the dev meshes at 64^3
-    local name=$1 method=$2
-    for ckpt in "$runs/$name"/step-*.safetensors; do
-        local out=$runs/eval_${name}_$(basename "$ckpt" .safetensors)
-        [[ -f $out/rows.csv ]] && continue
-        "$agndc" eval "$dev" --methods "$method" --checkpoint "$method=$ckpt" --res 64 -o "$out"
-    done
-}
+source scripts/study_runs.sh
 
 undc_steps=(--steps 1000 --val-steps 10,30,100,300,1000)
 agndc_steps=(--steps 300,100,100 --val-steps 10,30,100,300)
