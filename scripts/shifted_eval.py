@@ -7,7 +7,8 @@
 bounding box at fixed places in their voxel layers (docs/training.md, session of 2026-11-25,
 seventh). Here each mesh is voxelised with a shift drawn uniformly from [-0.5, 0.5) voxel per
 axis (seeded by the mesh's index, so every method sees the same grid), as the training data
-are, and the methods see that grid alone. Prints the means over the meshes as a markdown table.
+are, and the methods see that grid alone. Prints the means over the meshes as ``agndc eval``'s
+markdown table.
 """
 
 from __future__ import annotations
@@ -18,16 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from agndc_core.evaluate import require_meshes
+from agndc_core.evaluate import METRIC_COLUMNS, markdown_table, require_meshes, summarize_rows
 from agndc_core.gridio import load_mesh
 from agndc_core.labels import make_labels
-from agndc_core.metrics import REPORT_SCALE, evaluate
+from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh
 from agndc_core.voxelize import voxelize
 
 DEFAULT_METHODS = ("mc=mc", "surfacenets=surfacenets", "oracle_binary=oracle_binary",
                    "undc=undc", "agndc=agndc")
-COLUMNS = ("cd", "f1", "nc", "ecd", "ef1")
 
 
 def parse_method(text: str) -> tuple[str, str, str | None]:
@@ -56,19 +56,14 @@ def main() -> None:
                             reframe=False, source_bounds=False, threads=2)
             metrics = evaluate(result.vertices, result.faces, vertices, faces)
             rows.append({"name": Path(path).stem, "category": kind, "method": label,
-                         **{k: metrics[k] for k in COLUMNS}})
+                         **{k: metrics[k] for k in METRIC_COLUMNS}, "seconds": result.seconds})
         print(Path(path).stem, flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with open(args.out, "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    print("| method | shapes | CD×10⁵ | F1 | NC | ECD×10² | EF1 |\n|---|---|---|---|---|---|---|")
-    for label, _, _ in methods:
-        mine = [r for r in rows if r["method"] == label]
-        mean = {k: np.nanmean([r[k] for r in mine]) * REPORT_SCALE.get(k, 1) for k in COLUMNS}
-        print(f"| {label} | {len(mine)} | {mean['cd']:.3f} | {mean['f1']:.3f} | {mean['nc']:.3f} "
-              f"| {mean['ecd']:.2f} | {mean['ef1']:.3f} |")
+    print(markdown_table(summarize_rows(rows)))
 
 
 if __name__ == "__main__":
