@@ -74,13 +74,19 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--out", type=Path, default=Path("out/eval"))
     p.add_argument("--methods", default="mc,oracle",
                    help=f"comma list of {','.join(METHODS)}; surfacenets, undc or agndc with "
-                        "'+bounds' also get the mesh's bounding box (agndc_core/evaluate.py)")
+                        "'+bounds' also get the mesh's bounding box (agndc_core/evaluate.py); "
+                        "LABEL=METHOD scores a method under a label of its own, e.g. "
+                        "cpu3=agndc with --checkpoint cpu3=PATH beside the shipped agndc")
     p.add_argument("--res", type=int, default=64)
     p.add_argument("--samples", type=int, default=100_000)
     p.add_argument("--limit", type=int, help="only the first N meshes")
     p.add_argument("--checkpoint", action="append", default=[], metavar="METHOD=PATH",
-                   help="weights for a learned method instead of the shipped ones, e.g. "
-                   "agndc=runs/x/final.safetensors (repeatable)")
+                   help="weights for a learned method (or a LABEL=METHOD label) instead of "
+                   "the shipped ones, e.g. agndc=runs/x/final.safetensors (repeatable)")
+    p.add_argument("--shifts", type=int, default=0, metavar="K",
+                   help="score every mesh on K grids moved by seeded random sub-voxel shifts "
+                   "instead of the centred grid; means are over meshes and shifts, and the "
+                   "means of each shift are printed too (default 0: the centred grid)")
     p.set_defaults(func=_cmd_eval)
 
     p = sub.add_parser("demo", help="generate a CAD part, voxelise, reconstruct, compare")
@@ -196,24 +202,33 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (evaluate_meshes, headroom_lines, markdown_table, parse_methods,
-                           require_meshes, summarize_rows, write_report)
+    from .evaluate import (evaluate_meshes, headroom_lines, markdown_table, method_parts,
+                           parse_methods, require_meshes, shift_table, summarize_rows,
+                           write_report)
+    from .pipeline import CHECKPOINT_NAMES
 
     methods = parse_methods(args.methods)
+    learned_labels = {label for label, base, _ in map(method_parts, methods)
+                      if base in CHECKPOINT_NAMES}
     checkpoints = {}
     for item in args.checkpoint:
         method, _, path = item.partition("=")
-        if method not in ("agndc", "undc") or not path:
-            raise AGNDCError(f"--checkpoint wants agndc=PATH or undc=PATH, got {item!r}")
+        if method not in {*CHECKPOINT_NAMES, *learned_labels} or not path:
+            raise AGNDCError(f"--checkpoint wants agndc=PATH, undc=PATH or LABEL=PATH for a "
+                             f"LABEL=agndc|undc method, got {item!r}")
         checkpoints[method] = Path(path)
+    if args.shifts < 0:
+        raise AGNDCError(f"--shifts must be 0 or more, got {args.shifts}")
     meshes = require_meshes(args.folder, args.limit)
     rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples,
-                           checkpoints=checkpoints)
+                           checkpoints=checkpoints, shifts=args.shifts)
     written = write_report(rows, args.out)
     summaries = summarize_rows(rows)
     print(markdown_table(summaries))
     for line in headroom_lines(summaries):  # none unless mc and a ceiling were evaluated
         print(line)
+    if args.shifts > 1:
+        print(shift_table(rows))
     print("written: " + ", ".join(str(p) for p in written.values()))
     return 1 if any(r["error"] for r in rows) else 0
 

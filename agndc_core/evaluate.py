@@ -52,15 +52,24 @@ def find_meshes(folder: Path) -> list[tuple[Path, str]]:
 
 
 def parse_methods(text: str) -> list[str]:
-    """``"mc,agndc+bounds"`` -> ["mc", "agndc+bounds"]; unknown names raise one clear error."""
+    """``"mc,agndc+bounds,cpu3=agndc"`` -> ["mc", "agndc+bounds", "cpu3=agndc"]; unknown names
+    raise one clear error. ``LABEL=METHOD`` evaluates METHOD under its own label (a second
+    network of the same method, with ``checkpoints[LABEL]``; ``method_parts``)."""
     from .pipeline import BOUNDED_METHODS, METHODS
 
     methods = [m.strip() for m in text.split(",") if m.strip()]
-    unknown = [name for name, (base, bounded) in zip(methods, map(split_method, methods))
-               if base not in (BOUNDED_METHODS if bounded else METHODS)]
+    parts = [method_parts(name) for name in methods]
+    unknown = [name for name, (label, base, bounded) in zip(methods, parts)
+               if not label or base not in (BOUNDED_METHODS if bounded else METHODS)]
     if unknown:
         raise AGNDCError(f"unknown method(s) {unknown}; choose from {', '.join(METHODS)}, or "
-                         + ", ".join(m + BOUNDS_SUFFIX for m in BOUNDED_METHODS))
+                         + ", ".join(m + BOUNDS_SUFFIX for m in BOUNDED_METHODS)
+                         + ", each optionally as LABEL=METHOD")
+    labels = [label for label, _, _ in parts]
+    repeated = sorted({label for label in labels if labels.count(label) > 1})
+    if repeated:
+        raise AGNDCError(f"method label(s) {repeated} given twice; name them apart with "
+                         "LABEL=METHOD")
     return methods
 
 
@@ -69,6 +78,22 @@ def split_method(name: str) -> tuple[str, bool]:
     if name.endswith(BOUNDS_SUFFIX):
         return name[:-len(BOUNDS_SUFFIX)], True
     return name, False
+
+
+def method_parts(name: str) -> tuple[str, str, bool]:
+    """A method entry -> (label of its rows, method, with source bounds):
+    ``"agndc+bounds"`` -> ("agndc+bounds", "agndc", True); ``"cpu3=agndc"`` -> ("cpu3",
+    "agndc", False)."""
+    label, sep, method = name.partition("=")
+    base, bounded = split_method(method.strip() if sep else name)
+    return label.strip(), base, bounded
+
+
+def grid_shifts(mesh_index: int, count: int) -> np.ndarray:
+    """(count, 3) sub-voxel shifts of one mesh's evaluation grids, uniform in [-0.5, 0.5) voxel
+    per axis (the training data's augmentation), seeded by the mesh's index so that every
+    method and every run sees the same grids; the first row does not depend on ``count``."""
+    return np.random.default_rng([mesh_index, 77]).uniform(-0.5, 0.5, (count, 3))
 
 
 def require_meshes(folder, limit: int | None = None) -> list[tuple[Path, str]]:
@@ -80,8 +105,19 @@ def require_meshes(folder, limit: int | None = None) -> list[tuple[Path, str]]:
 
 
 def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkpoints=None,
-                    progress=True) -> list[dict]:
-    """Rows of metrics (raw, not scaled) for every mesh and method; failures become error rows."""
+                    shifts: int = 0, progress=True) -> list[dict]:
+    """Rows of metrics (raw, not scaled) for every mesh and method; failures become error rows.
+
+    Args:
+        methods: entries of ``parse_methods``; a row's "method" is the entry's label.
+        checkpoints: {label or method: checkpoint path} for the learned methods (a label's own
+            entry first, then its method's; otherwise the shipped weights).
+        shifts: 0 scores each mesh on ``voxelize``'s centred grid. K > 0 scores it on K grids
+            moved by ``grid_shifts`` instead (row column "shift" = 0..K-1): the centred grid
+            puts the faces of the mesh's bounding box at fixed depths in their voxel layers,
+            a cue real voxel data do not carry, and one grid per mesh leaves the means at the
+            mercy of each mesh's phase (docs/training.md, sessions of 2026-11-25).
+    """
     from tqdm import tqdm
 
     from .gridio import load_mesh
@@ -89,24 +125,27 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
 
     checkpoints = checkpoints or {}
     rows = []
-    jobs = [(path, kind, method) for path, kind in meshes for method in methods]
+    placements = list(range(shifts)) if shifts else [None]  # None: the centred grid
+    jobs = [(index, path, kind, k, method) for index, (path, kind) in enumerate(meshes)
+            for k in placements for method in methods]
     bar = tqdm(jobs, desc="eval", unit="run", disable=not progress)
     cache = {}
-    for path, kind, method in bar:
-        bar.set_postfix_str(f"{Path(path).name} {method}")
-        row = {"mesh": str(path), "name": Path(path).stem, "category": kind, "method": method,
-               "resolution": resolution}
+    for index, path, kind, k, method in bar:
+        label, base, bounded = method_parts(method)
+        bar.set_postfix_str(f"{Path(path).name} {label}" + ("" if k is None else f" shift {k}"))
+        row = {"mesh": str(path), "name": Path(path).stem, "category": kind, "method": label,
+               "resolution": resolution, "shift": k}
         try:
             if path not in cache:
                 cache = {path: load_mesh(path)}
             vertices, faces = cache[path]
-            base, bounded = split_method(method)
+            shift = (0.0, 0.0, 0.0) if k is None else grid_shifts(index, shifts)[k]
             result = remesh_mesh(vertices, faces, resolution=resolution, method=base,
-                                 checkpoint=checkpoints.get(base), source=Path(path).name,
-                                 source_bounds=bounded)
+                                 checkpoint=checkpoints.get(label, checkpoints.get(base)),
+                                 source=Path(path).name, source_bounds=bounded, shift=shift)
             start = time.perf_counter()
             metrics = evaluate(result.vertices, result.faces, vertices, faces, n_samples=n_samples)
-            row.update({k: metrics[k] for k in METRIC_COLUMNS})
+            row.update({column: metrics[column] for column in METRIC_COLUMNS})
             row.update(faces=len(result.faces), seconds=result.seconds,
                        metric_seconds=time.perf_counter() - start, error="")
         except AGNDCError as exc:
@@ -124,7 +163,7 @@ def summarize_rows(rows, by=("method",)) -> list[dict]:
     out = []
     for key, members in groups.items():
         summary = dict(zip(by, key))
-        summary["shapes"] = len(members)
+        summary["shapes"] = len({m["name"] for m in members})  # a mesh's shifted grids: once
         for column in METRIC_COLUMNS + ("seconds",):
             values = np.array([m[column] for m in members], dtype=float)
             values = values[np.isfinite(values)]
@@ -146,6 +185,31 @@ def markdown_table(summaries, first="method") -> str:
             cells.append("–" if math.isnan(value) else f"{value:.3f}")
         cells.append("–" if math.isnan(s["seconds"]) else f"{s['seconds']:.2f}")
         lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def shift_table(rows, columns=HEADROOM_COLUMNS) -> str:
+    """Markdown: each method's mean per shift (``evaluate_meshes(shifts=K)``) for ``columns``,
+    and the standard deviation of those means: how far one grid placement moves a mean, the
+    noise a difference between methods has to exceed."""
+    from .metrics import REPORT_SCALE
+
+    shifts = sorted({r["shift"] for r in rows if r["shift"] is not None})
+    summaries = summarize_rows([r for r in rows if r["shift"] is not None], by=("method", "shift"))
+    means = {(s["method"], s["shift"]): s for s in summaries}
+    methods = list(dict.fromkeys(s["method"] for s in summaries))
+    lines = []
+    for column in columns:
+        scale = REPORT_SCALE.get(column, 1.0)
+        head = ([f"{HEADERS[column]} by shift"] + [f"shift {k}" for k in shifts]
+                + ["std of the shift means"])
+        lines += ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for method in methods:
+            values = np.array([means[method, k][column] * scale for k in shifts])
+            spread = float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
+            cells = [method] + [f"{v:.3f}" for v in values] + [f"{spread:.3f}"]
+            lines.append("| " + " | ".join(cells) + " |")
+        lines.append("")
     return "\n".join(lines)
 
 

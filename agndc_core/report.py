@@ -55,10 +55,8 @@ def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
         rows += evaluate_meshes(meshes, methods, resolution=resolution, n_samples=n_samples)
     ablation_rows = {}
     for label, checkpoint in (ablations or {}).items():
-        found = evaluate_meshes(meshes, ["agndc"], resolution=resolutions[0], n_samples=n_samples,
-                                checkpoints={"agndc": checkpoint})
-        for row in found:
-            row["method"] = label
+        found = evaluate_meshes(meshes, [f"{label}=agndc"], resolution=resolutions[0],
+                                n_samples=n_samples, checkpoints={label: checkpoint})
         ablation_rows[label] = (Path(checkpoint), found)
     rows_dir = out_md.parent / f"{out_md.stem}_rows"
     write_report(rows + [r for _, found in ablation_rows.values() for r in found], rows_dir)

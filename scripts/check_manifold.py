@@ -1,10 +1,12 @@
 """Check every method's output on real data: closed, outward, 2-manifold (issue 14's counts).
 
     .venv/bin/python scripts/check_manifold.py ../shared/data/dev --res 64 128 \
-        [--methods mc,mc_taubin,surfacenets,undc,agndc,oracle] [--checkpoint agndc=PATH]
+        [--methods mc,mc_taubin,surfacenets,undc,agndc,agndc+bounds,oracle] [--checkpoint agndc=PATH]
 
 Every dev mesh is voxelised at each resolution and every grid file (.binvox, ...) is read as is;
-each reconstruction is checked with ``meshcheck.topology_violations`` and for a positive signed
+methods are named as for ``agndc eval`` (a plain learned method sees the grid alone, ``+bounds``
+also gets the mesh's bounding box, ``LABEL=METHOD`` takes ``--checkpoint LABEL=PATH``); each
+reconstruction is checked with ``meshcheck.topology_violations`` and for a positive signed
 volume of the whole mesh. Prints one line per defective result and a summary table; exits with
 status 1 if any result is defective.
 """
@@ -17,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agndc_core.evaluate import parse_methods, require_meshes
+from agndc_core.evaluate import method_parts, parse_methods, require_meshes
 from agndc_core.gridio import load_grid, load_mesh
 from agndc_core.meshcheck import topology_violations
-from agndc_core.pipeline import remesh, remesh_mesh
+from agndc_core.pipeline import MESH_ONLY_METHODS, remesh, remesh_mesh
 
 GRID_SUFFIXES = (".binvox", ".vox", ".npy", ".npz", ".nii", ".nii.gz")
 
@@ -35,7 +37,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path)
     parser.add_argument("--res", type=int, nargs="+", default=[64, 128])
-    parser.add_argument("--methods", default="mc,mc_taubin,surfacenets,undc,agndc,oracle")
+    parser.add_argument("--methods",
+                        default="mc,mc_taubin,surfacenets,undc,agndc,agndc+bounds,oracle")
     parser.add_argument("--checkpoint", action="append", default=[], metavar="METHOD=PATH")
     args = parser.parse_args()
     methods = parse_methods(args.methods)
@@ -47,9 +50,11 @@ def main() -> int:
     for path, res in jobs:
         source = load_grid(path) if res is None else load_mesh(path)
         for method in methods:
-            if res is None and method == "oracle":
+            label, base, bounded = method_parts(method)
+            if res is None and base in MESH_ONLY_METHODS:
                 continue  # needs a mesh
-            options = dict(method=method, checkpoint=checkpoints.get(method), threads=2)
+            options = dict(method=base, checkpoint=checkpoints.get(label, checkpoints.get(base)),
+                           threads=2, source_bounds=bounded)
             if res is None:
                 result = remesh(source, **options)
             else:

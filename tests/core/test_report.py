@@ -4,10 +4,14 @@
 import math
 
 import numpy as np
+import pytest
 import trimesh
 
 from agndc_core.checkpoint import default_checkpoint_path
-from agndc_core.evaluate import headroom_line, headroom_lines, headroom_shares
+from agndc_core.evaluate import (evaluate_meshes, grid_shifts, headroom_line, headroom_lines,
+                                  headroom_shares, method_parts, parse_methods, shift_table,
+                                  summarize_rows)
+from agndc_core.errors import AGNDCError
 from agndc_core.grid import VoxelGrid
 from agndc_core.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 
@@ -126,9 +130,66 @@ def test_eval_uses_the_checkpoint_it_is_given(tmp_path, capsys):
     assert rows["agndc"]["faces"] == rows["surfacenets"]["faces"]
     assert float(rows["agndc"]["cd"]) == pytest.approx(float(rows["surfacenets"]["cd"]),
                                                        rel=1e-6)
+    # the same weights under a label of their own, beside the shipped agndc
+    assert main(["eval", str(folder), "-o", str(out), "--methods",
+                 "untrained=agndc,agndc,surfacenets", "--res", "24", "--samples", "5000",
+                 "--checkpoint", f"untrained={weights}"]) == 0
+    rows = {r["method"]: r for r in csv.DictReader(open(out / "rows.csv"))}
+    assert float(rows["untrained"]["cd"]) == pytest.approx(float(rows["surfacenets"]["cd"]),
+                                                           rel=1e-6)
+    assert float(rows["agndc"]["cd"]) != pytest.approx(float(rows["surfacenets"]["cd"]),
+                                                       rel=1e-3)  # the shipped weights
     # only learned methods take weights: a clear error (exit status 2), not a traceback
     assert main(["eval", str(folder), "--checkpoint", "mc=x"]) == 2
     assert "--checkpoint wants" in capsys.readouterr().err
+    assert main(["eval", str(folder), "--methods", "a=mc", "--checkpoint", "a=x"]) == 2
+    assert "--checkpoint wants" in capsys.readouterr().err
+
+
+def test_method_entries_with_labels_and_bounds():
+    assert method_parts("agndc") == ("agndc", "agndc", False)
+    assert method_parts("agndc+bounds") == ("agndc+bounds", "agndc", True)
+    assert method_parts("cpu3=agndc") == ("cpu3", "agndc", False)
+    assert method_parts("cpu3b = undc+bounds") == ("cpu3b", "undc", True)
+    assert parse_methods("mc, cpu3=agndc,agndc+bounds") == ["mc", "cpu3=agndc", "agndc+bounds"]
+    for bad, words in (("mc,foo", "unknown"), ("x=foo", "unknown"), ("=agndc", "unknown"),
+                       ("mc+bounds", "unknown"), ("agndc,agndc=undc", "given twice")):
+        with pytest.raises(AGNDCError, match=words):
+            parse_methods(bad)
+
+
+def test_evaluation_on_shifted_grids(tmp_path):
+    """``shifts=K`` scores each mesh on K seeded, moved grids: the shifts are reproducible and
+    nested (the first K of a longer list), their rows differ from the centred grid's, and a
+    mesh counts once in the means whatever K is."""
+    first = grid_shifts(3, 1)
+    assert np.array_equal(grid_shifts(3, 4)[:1], first) and np.array_equal(grid_shifts(3, 1), first)
+    assert np.all(np.abs(grid_shifts(3, 4)) <= 0.5) and not np.allclose(grid_shifts(4, 1), first)
+    path = tmp_path / "slab.stl"
+    trimesh.creation.box((1.0, 0.6, 0.3), transform=trimesh.transformations.rotation_matrix(
+        0.3, [1, 1, 0])).export(path)
+    meshes = [(path, "mesh")]
+    centred = evaluate_meshes(meshes, ["mc", "sn=surfacenets"], resolution=16, n_samples=4000,
+                              progress=False)
+    shifted = evaluate_meshes(meshes, ["mc", "sn=surfacenets"], resolution=16, n_samples=4000,
+                              shifts=3, progress=False)
+    assert [r["shift"] for r in centred] == [None, None]
+    assert [(r["method"], r["shift"]) for r in shifted] == [
+        ("mc", 0), ("sn", 0), ("mc", 1), ("sn", 1), ("mc", 2), ("sn", 2)]
+    assert all(not r["error"] for r in centred + shifted)
+    assert len({r["faces"] for r in shifted if r["method"] == "mc"} | {centred[0]["faces"]}) > 1
+    summary = {s["method"]: s for s in summarize_rows(shifted)}
+    assert summary["mc"]["shapes"] == 1
+    assert summary["mc"]["cd"] == pytest.approx(np.mean([r["cd"] for r in shifted
+                                                          if r["method"] == "mc"]))
+    table = shift_table(shifted)
+    assert "| CD×10⁵ ↓ by shift | shift 0 | shift 1 | shift 2 | std of the shift means |" in table
+    cd_rows = [line for line in table.splitlines() if line.startswith("| sn |")]
+    assert len(cd_rows) == 2  # CD and EF1
+    values = [float(v) for v in cd_rows[0].strip("| ").split(" | ")[1:]]
+    cds = [r["cd"] * 1e5 for r in shifted if r["method"] == "sn"]
+    assert values[:3] == pytest.approx(cds, abs=1e-3)
+    assert values[3] == pytest.approx(np.std(cds, ddof=1), abs=1e-3)
 
 
 def test_models_table_says_where_the_weights_were_trained():
