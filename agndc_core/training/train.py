@@ -85,8 +85,9 @@ class TrainConfig:
     # crops may start at any point of their scale instead of on a window boundary: the part then
     # meets the coarse scales' pooling and the attention windows at every phase, as a surface
     # anywhere in a user's grid does (aligned crops show a part's low faces at one phase only).
-    # Off by default: measured worse on the dev meshes (docs/training.md, cpu2), since where an
-    # axis-aligned face lies in its voxel layer is tied to the grid's frame, a cue this hides
+    # Off by default: measured worse on the dev meshes (docs/training.md, fifth session of
+    # 2026-11-25, cpu2). Why is open: the guess that it hides a cue of voxelize's frame was
+    # measured and rejected (seventh session; gpu1 keeps its lead on shifted grids)
     random_phase: bool = False
     # on cells of exactly axis-aligned faces the finest scale's target coordinate along the
     # normal is the layer's midpoint (``labels.binary_visible_vertex``, the ``oracle_binary``
