@@ -163,7 +163,8 @@ def summarize_rows(rows, by=("method",)) -> list[dict]:
     out = []
     for key, members in groups.items():
         summary = dict(zip(by, key))
-        summary["shapes"] = len({m["name"] for m in members})  # a mesh's shifted grids: once
+        # a mesh scored on several shifted grids counts once; a row without a name on its own
+        summary["shapes"] = len({m.get("name", i) for i, m in enumerate(members)})
         for column in METRIC_COLUMNS + ("seconds",):
             values = np.array([m[column] for m in members], dtype=float)
             values = values[np.isfinite(values)]
