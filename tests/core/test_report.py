@@ -203,3 +203,17 @@ def test_models_table_says_where_the_weights_were_trained():
     assert _lineage_total(gpu) == " (warm-started: 2 runs, 10 min of steps in all)"
     assert _trained_on({}) == "CPU" and _lineage_total({}) == ""
     assert _trained_on({"hardware": "CPU, 2 threads, torch 2.13"}) == "CPU"
+
+
+def test_demo_the_readme_opens_with(tmp_path, capsys):
+    """``agndc demo`` (the README's first command, at a small size): every method's mesh, the
+    grid, and a table with one row per method."""
+    from agndc_core.cli import main
+
+    out = tmp_path / "demo"
+    assert main(["demo", "-o", str(out), "--res", "24"]) == 0
+    table = capsys.readouterr().out
+    for method in ("mc", "mc_taubin", "surfacenets", "oracle", "undc", "agndc"):
+        assert (out / f"part_{method}.obj").stat().st_size > 1000
+        assert f"| {method} | 1 |" in table
+    assert (out / "part.obj").is_file() and (out / "part_grid.npz").is_file()
