@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from .evaluate import (METRIC_COLUMNS, evaluate_meshes, headroom_lines, markdown_table,
-                       parse_methods, require_meshes, summarize_rows, write_report)
+                       method_parts, parse_methods, require_meshes, shift_table, summarize_rows,
+                       write_report)
 from .pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 
 REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle_binary", "oracle",
@@ -41,11 +42,13 @@ ROTATED_BOX_DEGREES = ((20.0, (1.0, 0.0, 0.0)), (35.0, (0.0, 1.0, 0.0)))
 
 def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
                  n_samples=100_000, figure_shapes=FIGURE_SHAPES, ablations=None,
-                 command=None) -> Path:
+                 command=None, shifts: int = 0) -> Path:
     """Evaluate, then write ``out_md`` (+ ``<stem>_rows/`` and ``<stem>_shapes.png``).
 
     ``ablations`` maps a label to an AGNDC checkpoint path: each is evaluated like ``agndc`` at
-    the first resolution and tabulated in the layout of the paper's Table 4.
+    the first resolution and tabulated in the layout of the paper's Table 4. ``shifts`` K > 0
+    adds, per resolution, the grid-alone methods on K seeded sub-voxel-shifted grids per mesh
+    (``evaluate_meshes(shifts=K)``; rows in ``<stem>_rows/shifted/``).
     """
     out_md = Path(out_md)
     out_md.parent.mkdir(parents=True, exist_ok=True)
@@ -58,18 +61,25 @@ def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
         found = evaluate_meshes(meshes, [f"{label}=agndc"], resolution=resolutions[0],
                                 n_samples=n_samples, checkpoints={label: checkpoint})
         ablation_rows[label] = (Path(checkpoint), found)
+    grid_alone = [m for m in methods if not method_parts(m)[2]]
+    shifted = [r for resolution in (resolutions if shifts else ())
+               for r in evaluate_meshes(meshes, grid_alone, resolution=resolution,
+                                        n_samples=n_samples, shifts=shifts)]
     rows_dir = out_md.parent / f"{out_md.stem}_rows"
     write_report(rows + [r for _, found in ablation_rows.values() for r in found], rows_dir)
+    if shifted:
+        write_report(shifted, rows_dir / "shifted")
     figure = out_md.parent / f"{out_md.stem}_shapes.png"
     pictured = render_figure(meshes, figure_shapes, figure, resolution=resolutions[0])
     text = _markdown(rows, resolutions, methods, figure if pictured else None, rows_dir, command,
-                     n_samples, ablation_rows, rotated_box_shown=ROTATED_BOX in figure_shapes)
+                     n_samples, ablation_rows, rotated_box_shown=ROTATED_BOX in figure_shapes,
+                     shifted=shifted)
     out_md.write_text(text)
     return out_md
 
 
 def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
-              ablation_rows, *, rotated_box_shown=False) -> str:
+              ablation_rows, *, rotated_box_shown=False, shifted=()) -> str:
     lines = ["# AGNDC results on the dev meshes", ""]
     lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
               f"{platform.machine()} with {os.cpu_count()} CPU cores, torch "
@@ -107,6 +117,9 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
                       markdown_table(summarize_rows(part)), ""]
         lines += [f"### {resolution}³: inference time per shape", "", _time_table(mine), ""]
         lines += [f"### {resolution}³: CD×10⁵ per shape", "", _per_shape_table(mine, "cd"), ""]
+    for resolution in resolutions if shifted else ():
+        lines += _shifted_section([r for r in shifted if r["resolution"] == resolution],
+                                  resolution)
     if ablation_rows:
         lines += [f"## Ablation ({resolutions[0]}³, all shapes; layout of the paper's Table 4)", "",
                   _ablation_table(rows, resolutions[0], ablation_rows), ""]
@@ -126,6 +139,24 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
         lines += ["## Picture", "", f"![{titles}]({figure.name})", "", caption, ""]
     lines += [f"Every row: `{rows_dir.name}/rows.csv` (raw metrics, faces, seconds, errors).", ""]
     return "\n".join(lines)
+
+
+def _shifted_section(rows, resolution) -> list[str]:
+    """The grid-alone methods on shifted grids: means, headroom, comparisons, per-shift means."""
+    count = len({r["shift"] for r in rows})
+    summaries = summarize_rows(rows)
+    lines = [f"## {resolution}³ on {count} shifted grids per mesh", "",
+             "The same methods, each mesh voxelised "
+             f"{count} times with a seeded random sub-voxel shift (uniform in [−0.5, 0.5) voxel "
+             "per axis, the training data's augmentation; `agndc eval --shifts`) instead of "
+             "centred on its bounding box, which puts the box's faces at fixed depths in their "
+             "layers. Means over meshes and shifts; below them, each shift's mean and their "
+             "spread: one grid per mesh moves these means by several percent.", "",
+             markdown_table(summaries), ""]
+    for line in headroom_lines(summaries):
+        lines += [line, ""]
+    lines += _comparison(summaries)
+    return lines + [shift_table(rows)]
 
 
 #: the sentences of ``_comparison``: (label, method, the baselines given the same information)
@@ -400,6 +431,9 @@ def add_parser(sub) -> None:
     p.add_argument("--samples", type=int, default=100_000)
     p.add_argument("--ablation", action="append", default=[], metavar="LABEL=CHECKPOINT",
                    help="an AGNDC variant's checkpoint for the ablation table (repeatable)")
+    p.add_argument("--shifts", type=int, default=0, metavar="K",
+                   help="also score the grid-alone methods on K seeded sub-voxel-shifted grids "
+                   "per mesh, at every resolution (agndc eval --shifts)")
     p.set_defaults(func=_cmd_report)
 
 
@@ -415,7 +449,10 @@ def _cmd_report(args) -> int:
                              ".safetensors file)")
         ablations[label] = checkpoint
     command = "agndc " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    if args.shifts < 0:
+        raise AGNDCError(f"--shifts must be 0 or more, got {args.shifts}")
     out = build_report(args.folder, args.out, resolutions=args.res, methods=methods,
-                       n_samples=args.samples, ablations=ablations, command=command)
+                       n_samples=args.samples, ablations=ablations, command=command,
+                       shifts=args.shifts)
     print(f"written: {out}")
     return 0

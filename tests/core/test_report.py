@@ -1,6 +1,7 @@
 """The results report: its voxel picture geometry, the MC→oracle headroom shares and a whole
 (small) report end to end."""
 
+import csv
 import math
 
 import numpy as np
@@ -76,7 +77,7 @@ def test_report_on_a_small_folder(tmp_path):
     out = build_report(folder, tmp_path / "report" / "results.md", resolutions=(20,),
                        methods=REPORT_METHODS, n_samples=5_000,
                        figure_shapes=("box",), command="agndc report test",
-                       ablations={"w/o nothing": default_checkpoint_path("agndc")})
+                       ablations={"w/o nothing": default_checkpoint_path("agndc")}, shifts=2)
     text = out.read_text()
     assert "`agndc report test`" in text
     assert "## 20³: all shapes" in text and "| oracle | 2 |" in text
@@ -86,8 +87,9 @@ def test_report_on_a_small_folder(tmp_path):
     assert "AGNDC against surfacenets: CD " in text
     assert "AGNDC+bounds against undc+bounds: CD " in text
     assert "AGNDC+bounds against surfacenets+bounds: CD " in text
+    centred = text.split("## 20³ on 2 shifted grids per mesh")[0]
     for ceiling in ("oracle", "oracle_binary"):
-        headroom = [line for line in text.splitlines()
+        headroom = [line for line in centred.splitlines()
                     if line.startswith(f"Share of the MC→{ceiling} headroom")]
         assert len(headroom) == 1  # one resolution
         for method in REPORT_METHODS:
@@ -102,6 +104,15 @@ def test_report_on_a_small_folder(tmp_path):
     assert (out.parent / "results_rows" / "w_o_nothing.md").is_file()
     assert (out.parent / "results_rows" / "rows.csv").is_file()
     assert (out.parent / "results_shapes.png").stat().st_size > 10_000
+    # the shifted grids: the grid-alone methods only, both shifts, their own rows
+    shifted = text.split("## 20³ on 2 shifted grids per mesh")[1].split("\n## ")[0]
+    assert "| agndc | 2 |" in shifted and "| oracle | 2 |" in shifted
+    assert "+bounds" not in shifted.split("Share of")[0]
+    assert "AGNDC against undc: CD " in shifted and "AGNDC+bounds" not in shifted
+    assert "| CD×10⁵ ↓ by shift | shift 0 | shift 1 | std of the shift means |" in shifted
+    with open(out.parent / "results_rows" / "shifted" / "rows.csv") as handle:
+        shifted_rows = list(csv.DictReader(handle))
+    assert len(shifted_rows) == 2 * 2 * 7 and {r["shift"] for r in shifted_rows} == {"0", "1"}
 
 
 def test_eval_uses_the_checkpoint_it_is_given(tmp_path, capsys):
