@@ -202,9 +202,9 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (evaluate_meshes, headroom_lines, markdown_table, method_parts,
-                           parse_methods, require_meshes, shift_table, summarize_rows,
-                           write_report)
+    from .evaluate import (check_shifts, evaluate_meshes, headroom_lines, markdown_table,
+                           method_parts, parse_methods, require_meshes, shift_table,
+                           summarize_rows, write_report)
     from .pipeline import CHECKPOINT_NAMES
 
     methods = parse_methods(args.methods)
@@ -217,8 +217,7 @@ def _cmd_eval(args) -> int:
             raise AGNDCError(f"--checkpoint wants agndc=PATH, undc=PATH or LABEL=PATH for a "
                              f"LABEL=agndc|undc method, got {item!r}")
         checkpoints[method] = Path(path)
-    if args.shifts < 0:
-        raise AGNDCError(f"--shifts must be 0 or more, got {args.shifts}")
+    check_shifts(args.shifts)
     meshes = require_meshes(args.folder, args.limit)
     rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples,
                            checkpoints=checkpoints, shifts=args.shifts)

@@ -96,6 +96,26 @@ def grid_shifts(mesh_index: int, count: int) -> np.ndarray:
     return np.random.default_rng([mesh_index, 77]).uniform(-0.5, 0.5, (count, 3))
 
 
+def check_shifts(shifts: int) -> int:
+    """``shifts`` of ``evaluate_meshes`` (0: the centred grid), refused when negative."""
+    if shifts < 0:
+        raise AGNDCError(f"--shifts must be 0 or more, got {shifts}")
+    return shifts
+
+
+def method_checkpoint(checkpoints: dict, label: str, method: str):
+    """The weights of a method entry: its label's own checkpoint, else its method's, else None
+    (the shipped weights)."""
+    return checkpoints.get(label, checkpoints.get(method))
+
+
+def _placements(mesh_index: int, shifts: int) -> list[tuple]:
+    """(shift column, sub-voxel shift) of every grid a mesh is scored on."""
+    if not shifts:
+        return [(None, (0.0, 0.0, 0.0))]  # the centred grid
+    return list(enumerate(grid_shifts(mesh_index, shifts)))
+
+
 def require_meshes(folder, limit: int | None = None) -> list[tuple[Path, str]]:
     """``find_meshes`` (the first ``limit``), refusing a folder without any."""
     meshes = find_meshes(folder)[:limit]
@@ -124,13 +144,13 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
     from .metrics import evaluate
 
     checkpoints = checkpoints or {}
+    check_shifts(shifts)
     rows = []
-    placements = list(range(shifts)) if shifts else [None]  # None: the centred grid
-    jobs = [(index, path, kind, k, method) for index, (path, kind) in enumerate(meshes)
-            for k in placements for method in methods]
+    jobs = [(path, kind, k, shift, method) for index, (path, kind) in enumerate(meshes)
+            for k, shift in _placements(index, shifts) for method in methods]
     bar = tqdm(jobs, desc="eval", unit="run", disable=not progress)
     cache = {}
-    for index, path, kind, k, method in bar:
+    for path, kind, k, shift, method in bar:
         label, base, bounded = method_parts(method)
         bar.set_postfix_str(f"{Path(path).name} {label}" + ("" if k is None else f" shift {k}"))
         row = {"mesh": str(path), "name": Path(path).stem, "category": kind, "method": label,
@@ -139,9 +159,8 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
             if path not in cache:
                 cache = {path: load_mesh(path)}
             vertices, faces = cache[path]
-            shift = (0.0, 0.0, 0.0) if k is None else grid_shifts(index, shifts)[k]
             result = remesh_mesh(vertices, faces, resolution=resolution, method=base,
-                                 checkpoint=checkpoints.get(label, checkpoints.get(base)),
+                                 checkpoint=method_checkpoint(checkpoints, label, base),
                                  source=Path(path).name, source_bounds=bounded, shift=shift)
             start = time.perf_counter()
             metrics = evaluate(result.vertices, result.faces, vertices, faces, n_samples=n_samples)

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import (METRIC_COLUMNS, evaluate_meshes, headroom_lines, markdown_table,
-                       method_parts, parse_methods, require_meshes, shift_table, summarize_rows,
-                       write_report)
+from .evaluate import (METRIC_COLUMNS, check_shifts, evaluate_meshes, headroom_lines,
+                       markdown_table, method_parts, parse_methods, require_meshes, shift_table,
+                       summarize_rows, write_report)
 from .pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 
 REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle_binary", "oracle",
@@ -106,11 +106,7 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
     lines += ["## Models", "", _models_table(methods), ""]
     for resolution in resolutions:
         mine = [r for r in rows if r["resolution"] == resolution]
-        summaries = summarize_rows(mine)
-        lines += [f"## {resolution}³: all shapes", "", markdown_table(summaries), ""]
-        for line in headroom_lines(summaries):
-            lines += [line, ""]
-        lines += _comparison(summaries)
+        lines += [f"## {resolution}³: all shapes", ""] + _means(summarize_rows(mine))
         for category in _categories(mine):
             part = [r for r in mine if r["category"] == category]
             lines += [f"### {resolution}³: {category}", "",
@@ -144,19 +140,22 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
 def _shifted_section(rows, resolution) -> list[str]:
     """The grid-alone methods on shifted grids: means, headroom, comparisons, per-shift means."""
     count = len({r["shift"] for r in rows})
-    summaries = summarize_rows(rows)
     lines = [f"## {resolution}³ on {count} shifted grids per mesh", "",
              "The same methods, each mesh voxelised "
              f"{count} times with a seeded random sub-voxel shift (uniform in [−0.5, 0.5) voxel "
              "per axis, the training data's augmentation; `agndc eval --shifts`) instead of "
              "centred on its bounding box, which puts the box's faces at fixed depths in their "
              "layers. Means over meshes and shifts; below them, each shift's mean and their "
-             "spread: one grid per mesh moves these means by several percent.", "",
-             markdown_table(summaries), ""]
+             "spread: one grid per mesh moves these means by several percent.", ""]
+    return lines + _means(summarize_rows(rows)) + [shift_table(rows)]
+
+
+def _means(summaries) -> list[str]:
+    """The means table, its headroom lines and the AGNDC comparison sentences."""
+    lines = [markdown_table(summaries), ""]
     for line in headroom_lines(summaries):
         lines += [line, ""]
-    lines += _comparison(summaries)
-    return lines + [shift_table(rows)]
+    return lines + _comparison(summaries)
 
 
 #: the sentences of ``_comparison``: (label, method, the baselines given the same information)
@@ -449,8 +448,7 @@ def _cmd_report(args) -> int:
                              ".safetensors file)")
         ablations[label] = checkpoint
     command = "agndc " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    if args.shifts < 0:
-        raise AGNDCError(f"--shifts must be 0 or more, got {args.shifts}")
+    check_shifts(args.shifts)  # before the long centred evaluation
     out = build_report(args.folder, args.out, resolutions=args.res, methods=methods,
                        n_samples=args.samples, ablations=ablations, command=command,
                        shifts=args.shifts)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agndc_core.evaluate import method_parts, parse_methods, require_meshes
+from agndc_core.evaluate import method_checkpoint, method_parts, parse_methods, require_meshes
 from agndc_core.gridio import load_grid, load_mesh
 from agndc_core.meshcheck import topology_violations
 from agndc_core.pipeline import MESH_ONLY_METHODS, remesh, remesh_mesh
@@ -53,7 +53,7 @@ def main() -> int:
             label, base, bounded = method_parts(method)
             if res is None and base in MESH_ONLY_METHODS:
                 continue  # needs a mesh
-            options = dict(method=base, checkpoint=checkpoints.get(label, checkpoints.get(base)),
+            options = dict(method=base, checkpoint=method_checkpoint(checkpoints, label, base),
                            threads=2, source_bounds=bounded)
             if res is None:
                 result = remesh(source, **options)
