@@ -82,6 +82,7 @@ class BatchOptions:
     min_component_faces: int = 0
     threads: int | None = None  # torch threads per job; None = the worker's share of the cores
     flat_patches: bool = True  # learned methods: flat voxel-face patches come out flat
+    normal_filter: bool = True  # learned methods: the mesh denoised, its creases kept
     source_bounds: bool = True  # dual methods on meshes: bounding faces on the mesh's box
 
 
@@ -223,6 +224,7 @@ def run_job(job: Job, options: BatchOptions) -> dict:
                              device=options.device,
                              min_component_faces=options.min_component_faces,
                              flat_patches=options.flat_patches,
+                             normal_filter=options.normal_filter,
                              source_bounds=options.source_bounds)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         save_mesh(result.vertices, result.faces, job.output)
@@ -466,7 +468,7 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
         fmt: "ply", "obj", "stl" or "glb".
         method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
-            min_component_faces, threads, flat_patches, source_bounds): as for
+            min_component_faces, threads, flat_patches, normal_filter, source_bounds): as for
             ``pipeline.remesh_file`` / ``agndc remesh``.
         workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
         engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).

@@ -80,6 +80,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--res", type=int, default=64)
     p.add_argument("--samples", type=int, default=100_000)
     p.add_argument("--limit", type=int, help="only the first N meshes")
+    _add_normal_filter_option(p)
     p.add_argument("--checkpoint", action="append", default=[], metavar="METHOD=PATH",
                    help="weights for a learned method (or a LABEL=METHOD label) instead of "
                    "the shipped ones, e.g. agndc=runs/x/final.safetensors (repeatable)")
@@ -125,10 +126,18 @@ def _add_remesh_options(p) -> None:
                    help="learned methods: keep the network's raw vertices on flat voxel faces "
                         "(by default each flat patch that is not a terrace of a slanted or "
                         "curved surface is given one depth, so flat faces come out flat)")
+    _add_normal_filter_option(p)
     p.add_argument("--no-source-bounds", dest="source_bounds", action="store_false",
                    help="mesh input, dual methods: use the voxel grid alone (by default the "
                         "faces that bound the mesh are put on its bounding box, which the grid "
                         "cannot place within a voxel, and no vertex lies beyond it)")
+
+
+def _add_normal_filter_option(p) -> None:
+    p.add_argument("--no-normal-filter", dest="normal_filter", action="store_false",
+                   help="learned methods: keep the contoured mesh as it is (by default it is "
+                        "denoised by bilateral normal filtering, which keeps its creases: "
+                        "agndc_core/normalfilter.py)")
 
 
 def _progress_bar(desc: str):
@@ -157,6 +166,7 @@ def _cmd_remesh(args) -> int:
                              device=args.device, progress=update,
                              min_component_faces=args.min_component_faces,
                              flat_patches=args.flat_patches,
+                             normal_filter=args.normal_filter,
                              source_bounds=args.source_bounds)
     finally:
         bar.close()
@@ -188,6 +198,7 @@ def _cmd_batch(args) -> int:
                            model_index=args.model_index, threads=args.threads,
                            device=args.device, min_component_faces=args.min_component_faces,
                            flat_patches=args.flat_patches,
+                           normal_filter=args.normal_filter,
                            source_bounds=args.source_bounds)
     finally:
         if main_thread:
@@ -220,7 +231,8 @@ def _cmd_eval(args) -> int:
     check_shifts(args.shifts)
     meshes = require_meshes(args.folder, args.limit)
     rows = evaluate_meshes(meshes, methods, resolution=args.res, n_samples=args.samples,
-                           checkpoints=checkpoints, shifts=args.shifts)
+                           checkpoints=checkpoints, shifts=args.shifts,
+                           normal_filter=args.normal_filter)
     written = write_report(rows, args.out)
     summaries = summarize_rows(rows)
     print(markdown_table(summaries))

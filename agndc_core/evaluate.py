@@ -125,7 +125,7 @@ def require_meshes(folder, limit: int | None = None) -> list[tuple[Path, str]]:
 
 
 def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkpoints=None,
-                    shifts: int = 0, progress=True) -> list[dict]:
+                    shifts: int = 0, progress=True, normal_filter: bool = True) -> list[dict]:
     """Rows of metrics (raw, not scaled) for every mesh and method; failures become error rows.
 
     Args:
@@ -137,6 +137,8 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
             puts the faces of the mesh's bounding box at fixed depths in their voxel layers,
             a cue real voxel data do not carry, and one grid per mesh leaves the means at the
             mercy of each mesh's phase (docs/training.md, sessions of 2026-11-25).
+        normal_filter: False scores the learned methods' meshes as contoured, without the
+            bilateral normal filter (``pipeline.remesh``).
     """
     from tqdm import tqdm
 
@@ -161,7 +163,8 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
             vertices, faces = cache[path]
             result = remesh_mesh(vertices, faces, resolution=resolution, method=base,
                                  checkpoint=method_checkpoint(checkpoints, label, base),
-                                 source=Path(path).name, source_bounds=bounded, shift=shift)
+                                 source=Path(path).name, source_bounds=bounded, shift=shift,
+                                 normal_filter=normal_filter)
             start = time.perf_counter()
             metrics = evaluate(result.vertices, result.faces, vertices, faces, n_samples=n_samples)
             row.update({column: metrics[column] for column in METRIC_COLUMNS})

@@ -53,7 +53,7 @@ _IN_PLANE[1, 0, 1] = _IN_PLANE[1, 2, 1] = True
 
 
 def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
-                    in_place: bool = False) -> np.ndarray:
+                    in_place: bool = False, pinned: np.ndarray | None = None) -> np.ndarray:
     """Flatten every flat-voxel-face patch of a lattice that is not a terrace.
 
     Args:
@@ -61,6 +61,8 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
         vertex: (X, Y, Z, 3) float, each cell's vertex as an offset from its min corner (the
             last layer along each axis holds no cell and is left as it is).
         in_place: write into ``vertex`` instead of a copy (a large grid's vertices are GBs).
+        pinned: optional (X, Y, Z, 3) bool, set True at every coordinate written, so later
+            stages can leave the flat faces alone (``pinned_coordinates``).
 
     Returns:
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
@@ -72,6 +74,7 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
         points = np.moveaxis(lattice, axis, -1)  # split axis last
         # (X-1, Y-1, Z-1) view of the cells' coordinate along axis, split axis last
         coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
+        pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
         layers = coord.shape[-1]
         # a patch lies in one layer, so slabs of layers are exact and bound the memory; each
         # slab also sees one layer beyond each end, which the terrace test reads
@@ -80,15 +83,17 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
             lo, hi = max(first - 1, 0), min(last + 1, layers)
             for lower_inside in KINDS:
                 _flatten_slab(points[..., lo:hi + 1], coord[..., lo:hi], lower_inside,
-                              range(first - lo, last - lo))
+                              range(first - lo, last - lo),
+                              None if pin is None else pin[..., lo:hi])
     return out
 
 
-def _flatten_slab(points, coord, lower_inside: bool, written: range) -> None:
+def _flatten_slab(points, coord, lower_inside: bool, written: range, pin=None) -> None:
     """Flatten the patches of one kind in ``written`` layers of a slab, in place.
 
     points: (A, B, L + 1) bool lattice points of the slab, split axis last; coord: (A - 1,
-    B - 1, L) float view of its cells' coordinate along the split axis."""
+    B - 1, L) float view of its cells' coordinate along the split axis; pin: None or a bool
+    view of coord's shape, set where coord is written."""
     split = _pure_splits_last(points, lower_inside)
     patches, count = ndimage.label(split, _IN_PLANE)
     if count == 0:
@@ -101,10 +106,12 @@ def _flatten_slab(points, coord, lower_inside: bool, written: range) -> None:
     keep = ~terrace_patches(split, patches, count)[patch_of]
     keep &= (cells[2] >= written.start) & (cells[2] < written.stop)  # halo layers: not ours
     coord[tuple(c[keep] for c in cells)] = mean[patch_of[keep]]
+    if pin is not None:
+        pin[tuple(c[keep] for c in cells)] = True
 
 
 def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
-                   in_place: bool = False) -> np.ndarray:
+                   in_place: bool = False, pinned: np.ndarray | None = None) -> np.ndarray:
     """Put the flat patches that bound the shape on the source mesh's bounding planes.
 
     Args:
@@ -113,6 +120,9 @@ def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
         bounds: (2, 3) float, the source mesh's bounding box (min corner, max corner) in
             lattice coordinates (``VoxelGrid.world_to_index`` + ``grid.LATTICE_PAD``).
         in_place: write into ``vertex`` instead of a copy.
+        pinned: optional (X, Y, Z, 3) bool, set True at the coordinate along the axis of every
+            cell of each outermost layer: this stage placed them on the bounding plane or
+            within it (``flatten_patches``).
 
     Returns:
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where every patch of each side's outermost
@@ -133,6 +143,8 @@ def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
         # the surface does not reach beyond its bounding box: edges and corners of the face
         clamp = np.minimum if lower_inside else np.maximum
         clamp(coord, local, out=coord)
+        if pinned is not None:
+            np.moveaxis(pinned[..., axis], axis, -1)[..., layer] = True
         patches, count = ndimage.label(split, _IN_PLANE)
         if count == 0:
             continue
@@ -140,6 +152,35 @@ def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
         mine = patches[..., layer - first]
         coord[:-1, :-1][(mine > 0) & ~terrace[mine]] = local
     return out
+
+
+def pinned_coordinates(vertices: np.ndarray, vertex: np.ndarray, pinned: np.ndarray):
+    """Which coordinates of contoured vertices a stage pinned: (V, 3) bool.
+
+    Args:
+        vertices: (V, 3) float lattice coordinates from ``contour.dual_contour``, which puts a
+            single-patch cell's vertex at cell + clip(offset, 0, 1).
+        vertex: (X, Y, Z, 3) float, the offsets that were contoured; pinned: (X, Y, Z, 3) bool
+            from ``flatten_patches`` / ``snap_to_bounds``.
+
+    A coordinate is pinned when the cell that holds the vertex pinned it and the vertex lies
+    exactly where that cell's offset puts it (a vertex on a cell's upper face is looked up in
+    both cells that share the face). Anything else -- a cell with several patches, a vertex on
+    a cell face between patches -- is not pinned.
+    """
+    top = np.array(vertex.shape[:3]) - 2  # the last cell along each axis
+    base = np.clip(np.floor(vertices).astype(np.int64), 0, top)  # (V, 3)
+    fixed = np.zeros(vertices.shape, dtype=bool)
+    for axis in range(3):
+        for step in (0, 1):  # the cell below too, for a vertex on a shared face
+            cell = base.copy()
+            cell[:, axis] -= step
+            ok = cell[:, axis] >= 0
+            index = tuple(cell[ok].T)
+            placed = cell[ok, axis] + np.clip(vertex[index + (axis,)], 0.0, 1.0)
+            fixed[np.flatnonzero(ok), axis] |= pinned[index + (axis,)] & (
+                placed == vertices[ok, axis])
+    return fixed
 
 
 def outermost_layers(lattice: np.ndarray, bounds):

@@ -109,7 +109,7 @@ def subrange(progress, lo: float, hi: float):
 def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
            min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None,
-           reframe: bool = True, flat_patches: bool = True,
+           reframe: bool = True, flat_patches: bool = True, normal_filter: bool = True,
            source_bounds: bool = True) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
@@ -129,6 +129,10 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         flat_patches: learned methods: give each flat voxel-face patch that is not a terrace
             one depth, the mean of the network's (``flatpatches.py``), so a flat face comes
             out flat. False keeps the network's raw vertices.
+        normal_filter: learned methods: denoise the contoured mesh while keeping its creases
+            (bilateral filtering of the face normals, then the vertices moved to fit them,
+            ``normalfilter.py``), so the faces between creases do not come out crumpled by the
+            network's cell-to-cell noise. False keeps the contoured mesh as it is.
         source_bounds: dual methods (``BOUNDED_METHODS``) on a grid voxelised from a mesh
             (``grid.source_bounds``): the flat patches that bound the shape lie on the mesh's
             bounding box (``flatpatches.snap_to_bounds``), so the result keeps the source's
@@ -157,17 +161,23 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
                                 checkpoint, threads, device, tile,
                                 subrange(progress, 0.05, 0.9), cancel, reframe)
-            if flat_patches and method in CHECKPOINT_NAMES:  # a network's vertices
-                from .flatpatches import flatten_patches
+        # where the flat-patch and bounds stages place a coordinate, the normal filter keeps it
+        filtered = normal_filter and method in CHECKPOINT_NAMES  # a network's mesh
+        pinned = np.zeros(vertex.shape, dtype=bool) if filtered else None
+        if method in CHECKPOINT_NAMES and flat_patches:  # a network's vertices
+            from .flatpatches import flatten_patches
 
-                vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
-                                    in_place=True)
+            vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
+                                in_place=True, pinned=pinned)
         if source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
             vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
-                                vertex)
+                                vertex, pinned)
         edge = crossed_edges(lattice)
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
+        if filtered:
+            vertices = stages.run("normal filter", 0.95, _filter_normals, vertices, faces,
+                                  vertex, pinned)
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
@@ -175,7 +185,18 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
 
 
-def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray):
+def _filter_normals(vertices, faces, vertex, pinned):
+    """``normalfilter.filter_mesh`` of a contoured mesh, in lattice units (where the network's
+    noise is the same along every axis), keeping the coordinates the flat-patch and bounds
+    stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets)."""
+    from .flatpatches import pinned_coordinates
+    from .normalfilter import filter_mesh
+
+    return filter_mesh(vertices, faces, fixed_vx3=pinned_coordinates(vertices, vertex, pinned))
+
+
+def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray,
+                           pinned=None):
     """``flatpatches.snap_to_bounds`` with the grid's source bounds in lattice coordinates; a
     grid whose axes are not the world's (a rotated affine) has no axis-aligned bounding planes
     in its own frame and is left as it is."""
@@ -187,7 +208,7 @@ def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndar
     corners = grid.world_to_index(grid.source_bounds) + LATTICE_PAD  # (2, 3)
     # a mirroring axis (negative voxel size) swaps which corner is the min one
     bounds = np.stack([corners.min(axis=0), corners.max(axis=0)])
-    return snap_to_bounds(lattice, vertex, bounds, in_place=True)
+    return snap_to_bounds(lattice, vertex, bounds, in_place=True, pinned=pinned)
 
 
 def orient_to_affine(faces_fx3: np.ndarray, affine: np.ndarray) -> np.ndarray:

@@ -375,6 +375,20 @@ def test_no_flat_patches_reaches_every_job(mixed, tmp_path):
     assert raw.read_bytes() != flat.read_bytes()
 
 
+def test_no_normal_filter_reaches_every_job(mixed, tmp_path):
+    """``agndc batch --no-normal-filter`` gives what ``agndc remesh --no-normal-filter`` gives,
+    and not what the default (the network's mesh denoised, normalfilter.py) gives."""
+    source = mixed / "a.npy"
+    out = tmp_path / "out"
+    assert main(["batch", str(source), "-o", str(out), "--method", "agndc", "--workers", "1",
+                 "--no-normal-filter", "--no-progress"]) == 0
+    raw, filtered = tmp_path / "raw.ply", tmp_path / "filtered.ply"
+    assert main(["remesh", str(source), "-o", str(raw), "--no-normal-filter"]) == 0
+    assert main(["remesh", str(source), "-o", str(filtered)]) == 0
+    assert (out / "a.ply").read_bytes() == raw.read_bytes()
+    assert raw.read_bytes() != filtered.read_bytes()
+
+
 def test_no_source_bounds_reaches_every_job(mixed, tmp_path):
     """``agndc batch --no-source-bounds`` gives what ``agndc remesh --no-source-bounds`` gives
     for a mesh, and not what the default (the mesh's bounding box) gives."""
