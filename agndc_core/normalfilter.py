@@ -72,23 +72,31 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
     """Unit normals (F, 3), areas (F,) and centroids (F, 3) of the faces (a zero-area face
     gets a zero normal, so it neither pulls on its neighbours nor moves its vertices)."""
-    corners = vertices[faces]  # (F, 3 corners, 3)
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])  # (F, 3)
-    length = np.linalg.norm(cross, axis=1)
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]  # (F, 3)
+    cross = np.cross(b - a, c - a)  # (F, 3)
+    length = np.sqrt(_dot(cross, cross))
     normals = np.divide(cross, length[:, None], out=np.zeros_like(cross),
                         where=length[:, None] > 0)
-    return normals, 0.5 * length, corners.mean(axis=1)
+    return normals, 0.5 * length, (a + b + c) / 3.0
+
+
+def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of two (N, 3) arrays: (N,)."""
+    return np.einsum("ij,ij->i", u, v)
 
 
 def face_neighbours(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """(P, 2) ordered pairs (i, j), i != j, of faces sharing at least one vertex."""
-    n_faces = len(faces)
-    # vertex x face incidence; its Gram matrix links faces through shared vertices
-    incidence = sp.csr_matrix((np.ones(faces.size), (faces.ravel(), np.repeat(
-        np.arange(n_faces), 3))), shape=(n_vertices, n_faces))
-    linked = (incidence.T @ incidence).tocoo()
+    incidence = vertex_faces(faces, n_vertices)
+    linked = (incidence.T @ incidence).tocoo()  # faces linked through a shared vertex
     keep = linked.row != linked.col
     return np.stack([linked.row[keep], linked.col[keep]], axis=1).astype(np.int64)
+
+
+def vertex_faces(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
+    """(V, F) sparse incidence: 1 where vertex v is a corner of face f."""
+    return sp.csr_matrix((np.ones(faces.size), (faces.ravel(), np.repeat(
+        np.arange(len(faces)), 3))), shape=(n_vertices, len(faces)))
 
 
 def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) -> np.ndarray:
@@ -102,15 +110,15 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
     n_faces = len(normals)
     if len(pairs) == 0:
         return normals
-    distance_sq = np.sum((centroids[i] - centroids[j]) ** 2, axis=1)  # (P,)
-    sigma_s_sq = np.mean(distance_sq)
-    spatial = areas[j] * np.exp(-distance_sq / (2.0 * sigma_s_sq))  # (P,)
+    offset = centroids[i] - centroids[j]  # (P, 3)
+    distance_sq = _dot(offset, offset)  # (P,)
+    spatial = areas[j] * np.exp(-distance_sq / (2.0 * np.mean(distance_sq)))  # (P,)
     for _ in range(params.normal_iterations):
-        agreement = np.exp(-np.sum((normals[i] - normals[j]) ** 2, axis=1)
-                           / (2.0 * params.sigma_normal ** 2))  # (P,)
-        weighted = (spatial * agreement)[:, None] * normals[j]  # (P, 3)
-        summed = areas[:, None] * normals + _sum_rows(i, weighted, n_faces)
-        length = np.linalg.norm(summed, axis=1, keepdims=True)
+        difference = normals[i] - normals[j]  # (P, 3)
+        agreement = np.exp(-_dot(difference, difference) / (2.0 * params.sigma_normal ** 2))
+        weights = sp.csr_matrix((spatial * agreement, (i, j)), shape=(n_faces, n_faces))
+        summed = areas[:, None] * normals + weights @ normals  # (F, 3)
+        length = np.sqrt(_dot(summed, summed))[:, None]
         normals = np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)
     return normals
 
@@ -118,21 +126,24 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
 def fit_vertices(vertices, faces, normals, iterations: int, fixed=None) -> np.ndarray:
     """Move each vertex towards the planes of its faces: x_v += mean over faces f of v of
     n_f (n_f . (c_f - x_v)), with c_f the face's current centroid, ``iterations`` times; the
-    ``fixed`` (V, 3) coordinates do not move."""
-    n_vertices = len(vertices)
-    degree = np.bincount(faces.ravel(), minlength=n_vertices).astype(np.float64)  # (V,)
-    degree = np.maximum(degree, 1.0)[:, None]
+    ``fixed`` (V, 3) coordinates do not move.
+
+    The sum splits into sum_f n_f (n_f . c_f) - (sum_f n_f n_f^T) x_v: the 3 x 3 matrices are
+    fixed (the normals do not change), so each pass is one sparse product and a batched
+    matrix-vector product."""
+    n_vertices, n_faces = len(vertices), len(faces)
+    incidence = vertex_faces(faces, n_vertices)  # row v sums over the faces of vertex v
+    degree = np.maximum(np.asarray(incidence.sum(axis=1)), 1.0)  # (V, 1)
     if fixed is not None:
         degree = np.where(fixed, np.inf, degree)  # (V, 3): a fixed coordinate's step is 0
-    corner_vertex = faces.ravel()  # (3F,) the vertex of each face corner
-    corner_normal = np.repeat(normals, 3, axis=0)  # (3F, 3)
+    outer = (incidence @ (normals[:, :, None] * normals[:, None, :]).reshape(n_faces, 9))
+    outer = outer.reshape(n_vertices, 3, 3)  # (V, 3, 3) sum of n n^T over each vertex's faces
     original = face_geometry(vertices, faces)[0]
     for _ in range(iterations):
-        centroids = vertices[faces].mean(axis=1)  # (F, 3)
-        to_plane = np.repeat(centroids, 3, axis=0) - vertices[corner_vertex]  # (3F, 3)
-        along = np.sum(corner_normal * to_plane, axis=1, keepdims=True) * corner_normal
-        moved = vertices + _sum_rows(corner_vertex, along, n_vertices) / degree
-        vertices = keep_orientation(vertices, moved, faces, original)
+        centroids = face_geometry(vertices, faces)[2]  # (F, 3)
+        pull = incidence @ (normals * _dot(normals, centroids)[:, None])  # (V, 3)
+        step = pull - np.einsum("vij,vj->vi", outer, vertices)  # (V, 3)
+        vertices = keep_orientation(vertices, vertices + step / degree, faces, original)
     return vertices
 
 
@@ -143,19 +154,14 @@ def keep_orientation(before, after, faces, original_normals) -> np.ndarray:
     size). Terminates: at worst every vertex returns to ``before``, which folded nothing."""
     after = after.copy()
     while True:
-        normals = face_geometry(after, faces)[0]
-        turned = np.sum(normals * original_normals, axis=1) < 0  # (F,)
+        a = after[faces[:, 0]]
+        turned = _dot(np.cross(after[faces[:, 1]] - a, after[faces[:, 2]] - a),
+                      original_normals) < 0  # (F,)
         back = np.unique(faces[turned])
         back = back[np.any(after[back] != before[back], axis=1)]
         if len(back) == 0:
             return after
         after[back] = before[back]
-
-
-def _sum_rows(index: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
-    """(n, 3): out[k] = sum of rows[index == k] (np.add.at, but vectorised by bincount)."""
-    return np.stack([np.bincount(index, weights=rows[:, a], minlength=n) for a in range(3)],
-                    axis=1)
 
 
 def filter_mesh_naive(vertices_vx3, faces_fx3, params: NormalFilter = DEFAULT,

@@ -96,12 +96,15 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               f"(marching cubes + trimesh Taubin smoothing, {TAUBIN_ITERATIONS} iterations) "
               "need no weights. `agndc` and `undc` include the flat-patch stage (each flat "
               "voxel-face patch that is not a terrace takes the mean of the network's depths, "
-              "`flatpatches.py`). Every method sees the grid alone, except the `+bounds` rows: "
+              "`flatpatches.py`) and the normal filter (the contoured mesh denoised by "
+              "bilateral filtering of its face normals, which keeps its creases, "
+              "`normalfilter.py`). Every method sees the grid alone, except the `+bounds` rows: "
               "the same method also given the mesh's bounding box, as `agndc remesh` and the "
               "Blender add-on do for mesh input (the faces that bound the shape are put on it, "
               "`flatpatches.snap_to_bounds`). That is information the grid does not hold, so the "
               "ceilings and the issue's acceptance are about the plain rows. "
-              "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring; "
+              "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring "
+              "+ filter; "
               f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
     lines += ["## Models", "", _models_table(methods), ""]
     for resolution in resolutions:

@@ -1,7 +1,7 @@
 """Geometric accuracy on analytic solids (issue 11's acceptance numbers), every method side by side.
 
     .venv/bin/python benchmarks/bench_geometry.py [--res 64] [--checkpoint agndc=PATH ...]
-        [--no-flat-patches] [--source-bounds]
+        [--no-flat-patches] [--no-normal-filter] [--source-bounds]
 
 An axis-aligned box (flatness, and RMS from the true planes), the box rotated 20/35 deg (face
 RMS, worst corner) and a sphere (radial RMS), errors in voxels; ``agndc_core/solids.py`` defines
@@ -30,6 +30,8 @@ def main() -> None:
     parser.add_argument("--checkpoint", action="append", default=[], metavar="METHOD=PATH")
     parser.add_argument("--no-flat-patches", dest="flat_patches", action="store_false",
                         help="learned methods: the network's raw vertices (pipeline.remesh)")
+    parser.add_argument("--no-normal-filter", dest="normal_filter", action="store_false",
+                        help="learned methods: the contoured mesh unfiltered (pipeline.remesh)")
     parser.add_argument("--source-bounds", action="store_true",
                         help="dual methods also get the solid's bounding box (pipeline.remesh)")
     args = parser.parse_args()
@@ -43,7 +45,8 @@ def main() -> None:
     for method in METHODS:
         try:
             e = measure(method, args.res, checkpoint=checkpoints.get(method), threads=2,
-                        flat_patches=args.flat_patches, source_bounds=args.source_bounds)
+                        flat_patches=args.flat_patches, normal_filter=args.normal_filter,
+                        source_bounds=args.source_bounds)
         except (AGNDCError, OSError) as exc:  # a missing checkpoint: report and go on
             print(f"{method:13s} failed: {exc}")
             continue

@@ -57,9 +57,10 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
     for seed in HELD_OUT_SEEDS:
         vertices, faces = generate_shape(seed)
         for m in cd:
-            # the grid alone: the mesh's bounding box would help surface nets as much
+            # the grid alone: the mesh's bounding box would help surface nets as much; the
+            # network's mesh as contoured: the normal filter would smooth surface nets too
             result = remesh_mesh(vertices, faces, resolution=RESOLUTION, method=m, threads=2,
-                                 source_bounds=False)
+                                 source_bounds=False, normal_filter=False)
             assert len(result.faces) > 0
             cd[m].append(evaluate(result.vertices, result.faces, vertices, faces,
                                   n_samples=N_SAMPLES)["cd"])
@@ -73,14 +74,32 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
 
 
 @pytest.mark.slow
-def test_shipped_agndc_meets_the_geometric_targets():
+def test_shipped_agndc_meets_the_geometric_targets(tmp_path):
     """Issue 11's analytic solids at 64³ (agndc_core/solids.py): flat box faces, the rotated
     box's faces and a sphere within their targets; the rotated box's corners (target 0.5 voxel,
-    not met yet: 0.89 on 2026-11-25) at least nearer than surface nets puts them."""
+    not met yet: 0.88 on 2026-11-25) at least nearer than surface nets puts them.
+
+    The normal filter alone takes surface nets' faces and sphere within the targets too (0.058
+    and 0.069 voxel), so the network must earn them twice: its own vertices, unfiltered, meet
+    them where surface nets' do not, and filtered it beats weights that learned nothing (an
+    untrained cascade: surface nets) filtered the same way."""
+    import torch
+
+    from agndc_core.checkpoint import save_checkpoint
+    from agndc_core.nn import AGNDCCascade, AGNDCConfig
+
     _shipped("agndc")
-    agndc, prior = (measure(method, 64, threads=2) for method in ("agndc", "surfacenets"))
+    torch.manual_seed(0)
+    nothing = save_checkpoint(AGNDCCascade(AGNDCConfig(width=8)), tmp_path / "untrained",
+                              training={}, metrics={})
+    agndc = measure("agndc", 64, threads=2)
+    raw = measure("agndc", 64, threads=2, normal_filter=False)
+    prior = measure("surfacenets", 64, threads=2)
+    prior_filtered = measure("agndc", 64, threads=2, checkpoint=nothing)
     for name in ("flatness", "rotated_rms", "sphere"):
         assert agndc[name] <= TARGETS[name], (name, agndc)
+    for name in ("rotated_rms", "sphere"):
+        assert raw[name] <= TARGETS[name] < prior[name], (name, raw, prior)
+    for name in ("corner", "sphere"):
+        assert agndc[name] < prior_filtered[name], (name, agndc, prior_filtered)
     assert agndc["corner"] < prior["corner"], (agndc, prior)
-    # weights that learned nothing give surface nets, which misses these targets
-    assert prior["rotated_rms"] > TARGETS["rotated_rms"] and prior["sphere"] > TARGETS["sphere"]
