@@ -31,8 +31,10 @@ CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
 #: shapes of the picture: file stems of the evaluated folder, or ``ROTATED_BOX`` (built here)
 FIGURE_SHAPES = ("fandisk", "rotated_box", "bunny_oded")
 #: (column title, method); "ground truth" is the source mesh itself
-FIGURE_COLUMNS = (("marching cubes", "mc"), ("surface nets", "surfacenets"), ("AGNDC", "agndc"),
-                  ("ground truth", None))
+#: (title, method, remesh options); the unfiltered AGNDC shows what the normal filter adds
+FIGURE_COLUMNS = (("marching cubes", "mc", {}), ("surface nets", "surfacenets", {}),
+                  ("AGNDC, unfiltered", "agndc", {"normal_filter": False}),
+                  ("AGNDC", "agndc", {}), ("ground truth", None, {}))
 #: the synthetic figure shape: a box turned off the grid axes, so its flat faces and sharp edges
 #: cross voxels at every angle (marching cubes and surface nets staircase it)
 ROTATED_BOX = "rotated_box"
@@ -128,7 +130,7 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
         lines += ["## Failures", ""] + [f"- {r['name']} {r['method']} {r['resolution']}³: "
                                         f"{r['error']}" for r in errors] + [""]
     if figure is not None:
-        titles = ", ".join(title for title, _ in FIGURE_COLUMNS)
+        titles = ", ".join(title for title, _, _ in FIGURE_COLUMNS)
         caption = f"Columns: {titles} at {resolutions[0]}³, edges drawn over the shading."
         if rotated_box_shown:
             turns = " and ".join(f"{a:g}° about {'xyz'[int(np.argmax(v))]}"
@@ -333,13 +335,13 @@ def render_figure(meshes, names, path, *, resolution=64) -> bool:
     n_cols = len(FIGURE_COLUMNS)
     fig = plt.figure(figsize=(3.6 * n_cols, 3.6 * len(chosen)), dpi=110)
     for row, (name, category, vertices, faces) in enumerate(chosen):
-        for col, (title, method) in enumerate(FIGURE_COLUMNS):
+        for col, (title, method, options) in enumerate(FIGURE_COLUMNS):
             if method is None:
                 pv, pf = vertices, faces
             else:
                 # the grid alone, as the tables' plain method names
                 result = remesh_mesh(vertices, faces, resolution=resolution, method=method,
-                                     source=name, source_bounds=False)
+                                     source=name, source_bounds=False, **options)
                 pv, pf = result.vertices, result.faces
             ax = fig.add_subplot(len(chosen), n_cols, row * n_cols + col + 1, projection="3d")
             _draw(ax, np.asarray(pv, float), np.asarray(pf), vertices)
