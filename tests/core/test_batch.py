@@ -361,32 +361,20 @@ def test_killed_run_leaves_no_partial_output(spheres, tmp_path, sig):
     assert not any(TEMP_MARK in p.name for p in out.iterdir())
 
 
-def test_no_flat_patches_reaches_every_job(mixed, tmp_path):
-    """``agndc batch --no-flat-patches`` gives what ``agndc remesh --no-flat-patches`` gives, and
-    not what the default (flat patches) gives."""
+@pytest.mark.parametrize("flag", ["--no-flat-patches", "--no-normal-filter"])
+def test_learned_method_switch_reaches_every_job(mixed, tmp_path, flag):
+    """``agndc batch --no-flat-patches`` (or ``--no-normal-filter``) gives what ``agndc remesh``
+    with the same switch gives, and not what the default (flat patches, the network's mesh
+    denoised) gives."""
     source = mixed / "a.npy"
     out = tmp_path / "out"
     assert main(["batch", str(source), "-o", str(out), "--method", "agndc", "--workers", "1",
-                 "--no-flat-patches", "--no-progress"]) == 0
-    raw, flat = tmp_path / "raw.ply", tmp_path / "flat.ply"
-    assert main(["remesh", str(source), "-o", str(raw), "--no-flat-patches"]) == 0
-    assert main(["remesh", str(source), "-o", str(flat)]) == 0
-    assert (out / "a.ply").read_bytes() == raw.read_bytes()
-    assert raw.read_bytes() != flat.read_bytes()
-
-
-def test_no_normal_filter_reaches_every_job(mixed, tmp_path):
-    """``agndc batch --no-normal-filter`` gives what ``agndc remesh --no-normal-filter`` gives,
-    and not what the default (the network's mesh denoised, normalfilter.py) gives."""
-    source = mixed / "a.npy"
-    out = tmp_path / "out"
-    assert main(["batch", str(source), "-o", str(out), "--method", "agndc", "--workers", "1",
-                 "--no-normal-filter", "--no-progress"]) == 0
-    raw, filtered = tmp_path / "raw.ply", tmp_path / "filtered.ply"
-    assert main(["remesh", str(source), "-o", str(raw), "--no-normal-filter"]) == 0
-    assert main(["remesh", str(source), "-o", str(filtered)]) == 0
-    assert (out / "a.ply").read_bytes() == raw.read_bytes()
-    assert raw.read_bytes() != filtered.read_bytes()
+                 flag, "--no-progress"]) == 0
+    switched, default = tmp_path / "switched.ply", tmp_path / "default.ply"
+    assert main(["remesh", str(source), "-o", str(switched), flag]) == 0
+    assert main(["remesh", str(source), "-o", str(default)]) == 0
+    assert (out / "a.ply").read_bytes() == switched.read_bytes()
+    assert switched.read_bytes() != default.read_bytes()
 
 
 def test_no_source_bounds_reaches_every_job(mixed, tmp_path):
