@@ -28,6 +28,7 @@ from .properties import (
     VOX_ITEMS,
     compare_mc_property,
     method_property,
+    normal_filter_property,
     output_property,
     resolution_property,
     size_mode_property,
@@ -38,8 +39,8 @@ from .properties import (
 )
 
 #: names shared by the operator properties and the scene settings
-SETTING_NAMES = ("size_mode", "voxel_size", "resolution", "method", "use_modifiers", "output",
-                 "compare_mc", "smooth", "threads")
+SETTING_NAMES = ("size_mode", "voxel_size", "resolution", "method", "normal_filter",
+                 "use_modifiers", "output", "compare_mc", "smooth", "threads")
 GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
 GRID_FILTER = ";".join(f"*{ext}" for ext in GRID_EXTENSIONS)
 #: seconds between modal updates (progress bar, status bar, worker check)
@@ -165,6 +166,7 @@ class _RemeshOperatorMixin:
             resolution=values.get("resolution", 64),
             voxel_size=values["voxel_size"] if values.get("size_mode") == "VOXEL_SIZE" else 0.0,
             method=values["method"], threads=threads,
+            normal_filter=values["normal_filter"],
             compare_mc=values["compare_mc"], smooth=values["smooth"],
             use_modifiers=values.get("use_modifiers", True),
             replace_source=values.get("output") == "REPLACE",
@@ -292,6 +294,7 @@ class OBJECT_OT_agndc_remesh(_RemeshOperatorMixin, bpy.types.Operator):
     voxel_size: voxel_size_property(**OPERATOR)
     resolution: resolution_property(**OPERATOR)
     method: method_property(**OPERATOR)
+    normal_filter: normal_filter_property(**OPERATOR)
     use_modifiers: use_modifiers_property(**OPERATOR)
     output: output_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
@@ -353,6 +356,7 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
     directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
     files: CollectionProperty(type=OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
     method: method_property(GRID_METHOD_ITEMS, **OPERATOR)
+    normal_filter: normal_filter_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
     smooth: smooth_property(**OPERATOR)
     threads: threads_property(**OPERATOR)
@@ -423,6 +427,9 @@ def draw_settings(layout, data, mesh: bool) -> None:
     layout.use_property_decorate = False
     col = layout.column()
     col.prop(data, "method")
+    learned = col.column()
+    learned.active = data.method in ("agndc", "undc")  # the filter acts on a network's mesh
+    learned.prop(data, "normal_filter")
     if mesh:
         col.prop(data, "size_mode")
         col.prop(data, "voxel_size" if data.size_mode == "VOXEL_SIZE" else "resolution")

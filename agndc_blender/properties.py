@@ -92,6 +92,14 @@ def compare_mc_property(**extra):
                         default=False, **extra)
 
 
+def normal_filter_property(**extra):
+    return BoolProperty(name="Denoise",
+                        description="AGNDC and UNDC: smooth out the network's cell-to-cell noise "
+                        "while keeping creases, flat faces and the source's dimensions (bilateral "
+                        "normal filter); off: the mesh as contoured",
+                        default=True, **extra)
+
+
 def smooth_property(**extra):
     return BoolProperty(name="Smooth Shading", description="Shade the new objects smooth",
                         default=False, **extra)
@@ -114,6 +122,7 @@ class AGNDC_RemeshSettings(bpy.types.PropertyGroup):
     voxel_size: voxel_size_property()
     resolution: resolution_property()
     method: method_property()
+    normal_filter: normal_filter_property()
     use_modifiers: use_modifiers_property()
     output: output_property()
     compare_mc: compare_mc_property()

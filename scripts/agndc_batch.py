@@ -49,6 +49,9 @@ def parse_args(argv):
     parser.add_argument("--method", default="agndc", choices=("agndc", "undc", "mc"))
     parser.add_argument("--compare-mc", action="store_true",
                         help="also write the marching-cubes mesh of the same grid")
+    parser.add_argument("--no-normal-filter", action="store_true",
+                        help="AGNDC/UNDC: keep the mesh as contoured (by default it is denoised, "
+                        "creases kept: agndc_core/normalfilter.py)")
     parser.add_argument("--threads", type=int, default=0, help="CPU threads (0 = automatic)")
     parser.add_argument("--format", default=".obj", help="output mesh extension (default .obj)")
     parser.add_argument("--checkpoint", help="custom weights (.safetensors)")
@@ -140,7 +143,8 @@ def main(argv) -> int:
     addon = argparse.Namespace(remesh=remesh, core=core, mesh_io=mesh_io)
     settings = remesh.Settings(resolution=args.res, method=args.method, threads=args.threads,
                                compare_mc=args.compare_mc, checkpoint=args.checkpoint,
-                               distance=not args.no_distance)
+                               distance=not args.no_distance,
+                               normal_filter=not args.no_normal_filter)
     if not args.input.exists():
         print(f"agndc_batch: error: {args.input}: no such file or folder", file=sys.stderr)
         return 2

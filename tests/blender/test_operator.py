@@ -188,22 +188,28 @@ def custom_checkpoint(addon):
     prefs.checkpoint = ""
 
 
-def test_agndc_operator_equals_api(addon, tiny_checkpoint, custom_checkpoint):
+@pytest.mark.parametrize("normal_filter", [True, False])
+def test_agndc_operator_equals_api(addon, tiny_checkpoint, custom_checkpoint, normal_filter):
+    """The operator's mesh is the core's, with Denoise (the normal filter) on or off."""
     custom_checkpoint(tiny_checkpoint)
     vertices, faces = cad_part()
     source = add_object(addon.mesh_io, "Part", vertices, faces)
     before = object_state(source)
     # one thread: a shared 2-core CI box thrashes with torch's default thread pool
-    assert _run(resolution=16, method="agndc", compare_mc=True, threads=1) == {"FINISHED"}
+    assert _run(resolution=16, method="agndc", compare_mc=True, threads=1,
+                normal_filter=normal_filter) == {"FINISHED"}
     assert_same_object_state(before, object_state(source))
     agndc, mc = bpy.data.objects["Part_AGNDC"], bpy.data.objects["Part_MC"]
     _assert_beside(agndc, source)
     _assert_beside(mc, agndc)  # the next free place along the source's X axis
     expected = remesh_mesh(vertices, faces, resolution=16, method="agndc",
-                           checkpoint=tiny_checkpoint, threads=1)
+                           checkpoint=tiny_checkpoint, threads=1, normal_filter=normal_filter)
+    other = remesh_mesh(vertices, faces, resolution=16, method="agndc",
+                        checkpoint=tiny_checkpoint, threads=1, normal_filter=not normal_filter)
     got_v, got_f = _mesh(agndc)
     np.testing.assert_array_equal(got_f, expected.faces)
     np.testing.assert_allclose(got_v, expected.vertices, rtol=0, atol=1e-5)
+    assert np.abs(got_v - other.vertices).max() > 1e-3  # the switch made a difference
 
 
 def test_import_grid_agndc_beside_mc(addon, tmp_path, tiny_checkpoint, custom_checkpoint):
