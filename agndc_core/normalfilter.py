@@ -63,21 +63,29 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
     faces = np.asarray(faces_fx3, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return vertices.copy()
-    normals, areas, centroids = face_geometry(vertices, faces)
-    pairs = face_neighbours(faces, len(vertices))
-    normals = bilateral_normals(normals, areas, centroids, pairs, params)
-    return fit_vertices(vertices, faces, normals, params.vertex_iterations, fixed_vx3)
+    original, areas, centroids = face_geometry(vertices, faces)
+    incidence = vertex_faces(faces, len(vertices))
+    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params)
+    return fit_vertices(vertices, faces, incidence, normals, original, params.vertex_iterations,
+                        fixed_vx3)
 
 
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
     """Unit normals (F, 3), areas (F,) and centroids (F, 3) of the faces (a zero-area face
     gets a zero normal, so it neither pulls on its neighbours nor moves its vertices)."""
     a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]  # (F, 3)
-    cross = np.cross(b - a, c - a)  # (F, 3)
+    cross = _face_cross(vertices, faces)  # (F, 3)
     length = np.sqrt(_dot(cross, cross))
     normals = np.divide(cross, length[:, None], out=np.zeros_like(cross),
                         where=length[:, None] > 0)
     return normals, 0.5 * length, (a + b + c) / 3.0
+
+
+def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) cross product of each face's two edges from its first corner: the normal times
+    twice the area, pointing the way the face winds."""
+    a = vertices[faces[:, 0]]
+    return np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a)
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -85,9 +93,9 @@ def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", u, v)
 
 
-def face_neighbours(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(P, 2) ordered pairs (i, j), i != j, of faces sharing at least one vertex."""
-    incidence = vertex_faces(faces, n_vertices)
+def face_neighbours(incidence: sp.csr_matrix) -> np.ndarray:
+    """(P, 2) ordered pairs (i, j), i != j, of faces sharing at least one vertex, from the
+    (V, F) ``vertex_faces`` incidence."""
     linked = (incidence.T @ incidence).tocoo()  # faces linked through a shared vertex
     keep = linked.row != linked.col
     return np.stack([linked.row[keep], linked.col[keep]], axis=1).astype(np.int64)
@@ -123,22 +131,23 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
     return normals
 
 
-def fit_vertices(vertices, faces, normals, iterations: int, fixed=None) -> np.ndarray:
+def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
+                 fixed=None) -> np.ndarray:
     """Move each vertex towards the planes of its faces: x_v += mean over faces f of v of
     n_f (n_f . (c_f - x_v)), with c_f the face's current centroid, ``iterations`` times; the
-    ``fixed`` (V, 3) coordinates do not move.
+    ``fixed`` (V, 3) coordinates do not move, and no face turns against its ``original``
+    (F, 3) normal (``keep_orientation``). ``incidence``: the (V, F) ``vertex_faces``.
 
     The sum splits into sum_f n_f (n_f . c_f) - (sum_f n_f n_f^T) x_v: the 3 x 3 matrices are
     fixed (the normals do not change), so each pass is one sparse product and a batched
     matrix-vector product."""
     n_vertices, n_faces = len(vertices), len(faces)
-    incidence = vertex_faces(faces, n_vertices)  # row v sums over the faces of vertex v
+    # row v of the incidence sums over the faces of vertex v
     degree = np.maximum(np.asarray(incidence.sum(axis=1)), 1.0)  # (V, 1)
     if fixed is not None:
         degree = np.where(fixed, np.inf, degree)  # (V, 3): a fixed coordinate's step is 0
     outer = (incidence @ (normals[:, :, None] * normals[:, None, :]).reshape(n_faces, 9))
     outer = outer.reshape(n_vertices, 3, 3)  # (V, 3, 3) sum of n n^T over each vertex's faces
-    original = face_geometry(vertices, faces)[0]
     for _ in range(iterations):
         centroids = face_geometry(vertices, faces)[2]  # (F, 3)
         pull = incidence @ (normals * _dot(normals, centroids)[:, None])  # (V, 3)
@@ -154,9 +163,7 @@ def keep_orientation(before, after, faces, original_normals) -> np.ndarray:
     size). Terminates: at worst every vertex returns to ``before``, which folded nothing."""
     after = after.copy()
     while True:
-        a = after[faces[:, 0]]
-        turned = _dot(np.cross(after[faces[:, 1]] - a, after[faces[:, 2]] - a),
-                      original_normals) < 0  # (F,)
+        turned = _dot(_face_cross(after, faces), original_normals) < 0  # (F,)
         back = np.unique(faces[turned])
         back = back[np.any(after[back] != before[back], axis=1)]
         if len(back) == 0:
@@ -171,11 +178,10 @@ def filter_mesh_naive(vertices_vx3, faces_fx3, params: NormalFilter = DEFAULT,
     faces = [tuple(int(k) for k in face) for face in np.asarray(faces_fx3).reshape(-1, 3)]
     if not faces:
         return vertices
-    normals, areas, centroids = [], [], []
-    original = [np.cross(vertices[b] - vertices[a], vertices[c] - vertices[a])
-                for a, b, c in faces]
+    normals, areas, centroids, original = [], [], [], []
     for a, b, c in faces:
         cross = np.cross(vertices[b] - vertices[a], vertices[c] - vertices[a])
+        original.append(cross)
         length = np.linalg.norm(cross)
         normals.append(cross / length if length > 0 else np.zeros(3))
         areas.append(0.5 * length)

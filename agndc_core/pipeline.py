@@ -176,8 +176,8 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
                                      min_component_faces=min_component_faces)
         if filtered:
-            vertices = stages.run("normal filter", 0.95, _filter_normals, vertices, faces,
-                                  vertex, pinned)
+            vertices = stages.run("normal filter", 0.95, filter_contoured_mesh, vertices,
+                                  faces, vertex, pinned)
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
@@ -185,7 +185,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
 
 
-def _filter_normals(vertices, faces, vertex, pinned):
+def filter_contoured_mesh(vertices, faces, vertex, pinned):
     """``normalfilter.filter_mesh`` of a contoured mesh, in lattice units (where the network's
     noise is the same along every axis), keeping the coordinates the flat-patch and bounds
     stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets)."""

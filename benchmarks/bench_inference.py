@@ -27,14 +27,14 @@ import torch
 from agndc_core.checkpoint import (count_parameters, default_checkpoint_path, load_checkpoint,
                                    save_checkpoint)
 from agndc_core.contour import dual_contour
-from agndc_core.flatpatches import flatten_patches, pinned_coordinates
+from agndc_core.flatpatches import flatten_patches
 from agndc_core.labels import crossed_edges
 from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import predict_lattice
-from agndc_core.normalfilter import filter_mesh
 from agndc_core.mc import marching_cubes_lattice
 from agndc_core.nn import AGNDCCascade, AGNDCConfig
 from agndc_core.nn.band_ops import surface_distance
+from agndc_core.pipeline import filter_contoured_mesh
 from agndc_core.shapes import generate_shape
 from agndc_core.voxelize import voxelize
 
@@ -100,7 +100,7 @@ def run_one(spec: str, size: int, seed: int, device: str, repeat: int) -> dict:
         flattened = time.perf_counter() - start
         vertices, faces = dual_contour(vertex, crossed_edges(lattice), lattice)
         contoured = time.perf_counter() - start
-        filter_mesh(vertices, faces, fixed_vx3=pinned_coordinates(vertices, vertex, pinned))
+        filter_contoured_mesh(vertices, faces, vertex, pinned)
         total = time.perf_counter() - start
         times["flat patches"] = flattened - network
         times["contour"] = contoured - flattened
