@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
-# The paper's Table 4 rows on a CPU (docs/training.md, "the ablation"): +GDFEM (one scale) and
-# +DFFM (no CRPM) start from the shipped AGNDC with every tensor they share with it
-# (--init-matching), the full model from all of it as the control. All three put the surface nets
-# prior on the shipped weights, so their finest vertex heads restart at zero and every variant
-# starts exactly at surface nets (a knocked-out module would otherwise leave the old head adding
-# offsets that no longer fit: vertex loss ~1000x the trained one). Then the same recipe and steps:
-# C steps of scale 1 where the variant has one (without CRPM scale 1 lost its CRPM too), then S
-# of the finest scale. Each is scored on the dev meshes at 64^3; the table is
+# The paper's Table 4 rows on a CPU (docs/training.md, "the ablation"): none (the UNDC baseline:
+# one scale, plain convolutions), +GDFEM (one scale), +DFFM (no CRPM) start from the shipped
+# AGNDC with every tensor they share with it (--init-matching), the full model from all of it as
+# the control. All four put the surface nets prior on the shipped weights, so their finest vertex
+# heads restart at zero and every variant starts exactly at surface nets (a knocked-out module
+# would otherwise leave the old head adding offsets that no longer fit: vertex loss ~1000x the
+# trained one). Then the same recipe and steps: C steps of scale 1 where the variant has one
+# (without CRPM scale 1 lost its CRPM too), then S of the finest scale. Each is scored on the dev
+# meshes at 64^3 as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the
+# network's own vertices; runs "<variant>_unfiltered"); the table is
 # scripts/learning_curve_table.py RUNS (rows "<variant> @ S").
 # What this measures: how fast each variant's trained features relearn the vertices, at equal
 # steps; not what retraining each variant from scratch would reach (a GPU's work).
@@ -27,10 +29,16 @@ source scripts/study_runs.sh
 # the shipped model's architecture, with the surface nets prior (default)
 shipped='"width": 16, "snake_kernel": 5, "band_radius": 4'
 
+both_scores() {  # name: with the normal filter (the default) and without it
+    score "$1" agndc
+    score "$1" agndc _unfiltered --no-normal-filter
+}
 train full --model "{$shipped}" --steps "$finest,$coarse,0" || exit 0
-score full agndc
+both_scores full
+train none --model "{$shipped, \"levels\": 0, \"use_attention\": false, \"use_snake\": false, \"use_dffm\": false, \"use_crpm\": false}" --steps "$finest" || exit 0
+both_scores none
 train plus_gdfem --model "{$shipped, \"levels\": 0}" --steps "$finest" || exit 0
-score plus_gdfem agndc
+both_scores plus_gdfem
 train plus_dffm --model "{$shipped, \"use_crpm\": false}" --steps "$finest,$coarse,0" || exit 0
-score plus_dffm agndc
+both_scores plus_dffm
 .venv/bin/python scripts/learning_curve_table.py "$runs"

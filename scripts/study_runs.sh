@@ -12,11 +12,14 @@ train() {  # name, then the run's own arguments; fails if a time cap stopped the
     [[ -f $runs/$name/final.safetensors ]]  # stopped by the time cap: the caller stops too
 }
 
-score() {  # name, method: every step checkpoint of the run on the dev meshes at 64^3
-    local name=$1 method=$2
+score() {  # name, method[, tag, eval options]: every step checkpoint of the run on the dev
+    # meshes at 64^3; a tag names a second scoring with other options (e.g. _unfiltered
+    # --no-normal-filter), read back as the run "<name><tag>"
+    local name=$1 method=$2 tag=${3:-}
+    shift $(( $# < 3 ? $# : 3 ))
     for ckpt in "$runs/$name"/step-*.safetensors; do
-        local out=$runs/eval_${name}_$(basename "$ckpt" .safetensors)
+        local out=$runs/eval_${name}${tag}_$(basename "$ckpt" .safetensors)
         [[ -f $out/rows.csv ]] && continue
-        "$agndc" eval "$dev" --methods "$method" --checkpoint "$method=$ckpt" --res 64 -o "$out"
+        "$agndc" eval "$dev" --methods "$method" --checkpoint "$method=$ckpt" --res 64 -o "$out" "$@"
     done
 }

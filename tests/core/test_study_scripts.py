@@ -1,0 +1,47 @@
+"""The resumable study scripts' shared steps (scripts/study_runs.sh), with a stand-in for the
+agndc command that records how it was called."""
+
+import subprocess
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+# writes its arguments and an empty rows.csv where `-o` points, as `agndc eval` would
+FAKE_AGNDC = """#!/usr/bin/env bash
+echo "$@" >> "$CALLS"
+while [[ $# -gt 0 ]]; do
+    if [[ $1 == -o ]]; then mkdir -p "$2"; touch "$2/rows.csv"; fi
+    shift
+done
+"""
+
+
+def _score(tmp_path, *calls: str) -> list[str]:
+    runs = tmp_path / "runs"
+    for step in (10, 300):
+        (runs / "full").mkdir(parents=True, exist_ok=True)
+        (runs / "full" / f"step-{step:06d}.safetensors").touch()
+    fake = tmp_path / "agndc"
+    fake.write_text(FAKE_AGNDC)
+    fake.chmod(0o755)
+    script = "\n".join([f"set -euo pipefail; cd {REPO}", f"runs={runs}; dev=DEV; common=()",
+                        "source scripts/study_runs.sh", f"agndc={fake}", *calls])
+    subprocess.run(["bash", "-c", script], check=True, env={"CALLS": str(tmp_path / "calls"),
+                                                            "PATH": "/usr/bin:/bin"})
+    calls_file = tmp_path / "calls"
+    return calls_file.read_text().splitlines() if calls_file.exists() else []
+
+
+def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path):
+    runs = tmp_path / "runs"
+    calls = _score(tmp_path, "score full agndc", "score full agndc _unfiltered --no-normal-filter")
+    assert len(calls) == 4
+    for step in ("000010", "000300"):
+        plain = f"eval DEV --methods agndc --checkpoint agndc={runs}/full/step-{step}.safetensors " \
+                f"--res 64 -o {runs}/eval_full_step-{step}"
+        assert plain in calls
+        assert f"{plain.replace('eval_full_', 'eval_full_unfiltered_')} --no-normal-filter" \
+            in calls
+    # resumable: a finished evaluation (its rows.csv exists) is not run again
+    assert _score(tmp_path, "score full agndc", "score full agndc _unfiltered --no-normal-filter"
+                  ) == calls
