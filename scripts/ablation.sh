@@ -29,16 +29,12 @@ source scripts/study_runs.sh
 # the shipped model's architecture, with the surface nets prior (default)
 shipped='"width": 16, "snake_kernel": 5, "band_radius": 4'
 
-both_scores() {  # name: with the normal filter (the default) and without it
-    score "$1" agndc
-    score "$1" agndc _unfiltered --no-normal-filter
-}
 train full --model "{$shipped}" --steps "$finest,$coarse,0" || exit 0
-both_scores full
+both_scores full agndc
 train none --model "{$shipped, \"levels\": 0, \"use_attention\": false, \"use_snake\": false, \"use_dffm\": false, \"use_crpm\": false}" --steps "$finest" || exit 0
-both_scores none
+both_scores none agndc
 train plus_gdfem --model "{$shipped, \"levels\": 0}" --steps "$finest" || exit 0
-both_scores plus_gdfem
+both_scores plus_gdfem agndc
 train plus_dffm --model "{$shipped, \"use_crpm\": false}" --steps "$finest,$coarse,0" || exit 0
-both_scores plus_dffm
+both_scores plus_dffm agndc
 .venv/bin/python scripts/learning_curve_table.py "$runs"

@@ -2,8 +2,10 @@
 # The learning-curve study of issue 11 (docs/training.md, "the learning-curve study"): UNDC and AGNDC at
 # widths 16 and 32, trained from scratch on the same data with the same recipe, a checkpoint at
 # finest-scale steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3;
-# then UNDC 16 for 3,000 steps (what a 3x longer run buys). AGNDC at width 32 comes last: at
-# ~6 s per step on 2 cores it is the one a short session leaves out.
+# then UNDC 16 for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for
+# 1,000 steps (run in the tenth session: it stays at surface nets). Every point is scored as
+# remeshed and as contoured (runs "<name>_unfiltered"; the sixth session's points predate the
+# normal filter, so they are the contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
 #   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=/work/data/v2_train
 # Optional: AGNDC_CURVE_MINUTES caps each training call (it stops cleanly; run again to go on).
@@ -22,13 +24,15 @@ agndc_steps=(--steps 300,100,100 --val-steps 10,30,100,300)
 agndc_model='"snake_kernel": 5, "band_radius": 4'
 
 train undc16 --undc --model '{"width": 16}' "${undc_steps[@]}" || exit 0
-score undc16 undc
+both_scores undc16 undc
 train agndc16 --model "{\"width\": 16, $agndc_model}" "${agndc_steps[@]}" || exit 0
-score agndc16 agndc
+both_scores agndc16 agndc
 train undc32 --undc --model '{"width": 32}' "${undc_steps[@]}" || exit 0
-score undc32 undc
+both_scores undc32 undc
 train undc16_long --undc --model '{"width": 16}' --steps 3000 --val-steps 1000,2000,3000 || exit 0
-score undc16_long undc
+both_scores undc16_long undc
 train agndc32 --model "{\"width\": 32, $agndc_model}" "${agndc_steps[@]}" || exit 0
-score agndc32 agndc
+both_scores agndc32 agndc
+train agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 1000,100,100 --val-steps 300,1000 || exit 0
+both_scores agndc16_long agndc
 .venv/bin/python scripts/learning_curve_table.py "$runs"

@@ -23,3 +23,9 @@ score() {  # name, method[, tag, eval options]: every step checkpoint of the run
         "$agndc" eval "$dev" --methods "$method" --checkpoint "$method=$ckpt" --res 64 -o "$out" "$@"
     done
 }
+
+both_scores() {  # name, method: as remeshed (the normal filter on, the default) and as
+    # contoured (the network's own vertices, run "<name>_unfiltered")
+    score "$1" "$2"
+    score "$1" "$2" _unfiltered --no-normal-filter
+}

@@ -33,8 +33,9 @@ def _score(tmp_path, *calls: str) -> list[str]:
 
 
 def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path):
+    """both_scores = score as remeshed + score tagged _unfiltered with --no-normal-filter."""
     runs = tmp_path / "runs"
-    calls = _score(tmp_path, "score full agndc", "score full agndc _unfiltered --no-normal-filter")
+    calls = _score(tmp_path, "both_scores full agndc")
     assert len(calls) == 4
     for step in ("000010", "000300"):
         plain = f"eval DEV --methods agndc --checkpoint agndc={runs}/full/step-{step}.safetensors " \
@@ -43,5 +44,4 @@ def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path
         assert f"{plain.replace('eval_full_', 'eval_full_unfiltered_')} --no-normal-filter" \
             in calls
     # resumable: a finished evaluation (its rows.csv exists) is not run again
-    assert _score(tmp_path, "score full agndc", "score full agndc _unfiltered --no-normal-filter"
-                  ) == calls
+    assert _score(tmp_path, "both_scores full agndc") == calls
