@@ -85,21 +85,38 @@ class AGNDCCascade(nn.Module):
 
     @torch.no_grad()
     def _init_outputs(self, root: nn.Module | None = None, snakes: bool = True) -> None:
-        """Start every vertex output at the cell centre (the surface nets vertex once the prior
-        is added) and every snake straight: zero weights there, as deformable-convolution
-        practice does for offsets; a randomly bent kernel or a random vertex is pure noise that
-        the first thousand steps would only spend undoing. ``root``: only its modules (e.g. one
-        scale's net, to restart a warm-started network's vertex output)."""
-        for module in (root or self).modules():
-            if isinstance(module, PredictionHead):
-                module.fc2.weight[:3] = 0.0
-                module.fc2.bias[:3] = CENTRE
-            elif isinstance(module, DFFM):
-                module.out.weight[:3] = 0.0  # W_s's vertex part is added to P'_s without CRPM
-                module.out.bias[:3] = 0.0
-            elif isinstance(module, DSConv) and snakes:
-                module.offset.weight.zero_()
-                module.offset.bias.zero_()
+        """Start every scale's vertex output at the cell centre (the surface nets vertex once
+        the prior is added) and every snake straight, as deformable-convolution practice does
+        for offsets: a randomly bent kernel or a random vertex is pure noise that the first
+        thousand steps would only spend undoing. ``root``: only its modules (e.g. one scale's
+        net, to restart a warm-started network's vertex output).
+
+        Only the *last* layer on each path to the vertex output starts at zero. With CRPM the
+        output is CRPM's head, which sees the trunk only through P'_s and W_s (12 channels,
+        eq. 22): zeroing their vertex rows too would put two zero layers in series, whose
+        gradients are each proportional to the other's weights, and the cascade would sit at
+        its starting point (AGNDC from scratch stayed at surface nets for 1,000 steps so:
+        docs/training.md, tenth session). Their vertex rows keep their random start and carry
+        the trunk's features into CRPM, as the edge rows do."""
+        root = root or self
+        nets = [root] if isinstance(root, AGDRNet) else [m for m in root.modules()
+                                                           if isinstance(m, AGDRNet)]
+        for net in nets:
+            if net.crpm is not None:
+                outputs, fused = [net.crpm.head], None
+            else:
+                outputs, fused = [net.fdm.head], net.dffm
+            for head in outputs:
+                head.fc2.weight[:3] = 0.0
+                head.fc2.bias[:3] = CENTRE
+            if fused is not None:
+                fused.out.weight[:3] = 0.0  # W_s's vertex part is added to P'_s without CRPM
+                fused.out.bias[:3] = 0.0
+        if snakes:
+            for module in root.modules():
+                if isinstance(module, DSConv):
+                    module.offset.weight.zero_()
+                    module.offset.bias.zero_()
 
     def add_prior(self, p0: torch.Tensor, occupancy0) -> torch.Tensor:
         """P_0 (..., X, Y, Z, 6) channel-last + the surface nets prior of its occupancy.

@@ -195,6 +195,30 @@ def test_untrained_network_returns_surface_nets(kw):
             assert int(torch.count_nonzero(module.offset.weight)) == 0
 
 
+def test_crpm_sees_the_trunk_through_every_input_channel_at_initialisation():
+    """Only the last layer before the vertex output starts at zero. CRPM reaches the trunk
+    only through P'_s and W_s: had their vertex rows started at zero as well, two zero layers
+    in series would hold each other's gradients at zero and the cascade would not leave
+    surface nets (it did not, for 1,000 steps from scratch, before this was fixed)."""
+    torch.manual_seed(0)
+    net = AGNDCCascade(AGNDCConfig(width=8)).eval()
+    lattice = blob_lattice((24, 20, 16))
+    seen = {}
+    for s, scale in enumerate(net.nets[:-1]):
+        scale.crpm.register_forward_hook(
+            lambda module, args, out, s=s: seen.__setitem__(s, (args[0], args[1])))
+    with torch.inference_mode():
+        net(torch.from_numpy(lattice)[None])
+    surface = torch.from_numpy(surface_cells(crossed_edges(lattice)))
+    for s, (w, p_iso) in seen.items():
+        cells = surface if s == 0 else torch.ones(w.shape[1:4], dtype=torch.bool)
+        for name, x in (("W", w), ("P'", p_iso)):
+            spread = x[0][cells].std(dim=0)  # (6,) over the cells
+            assert bool(torch.all(spread > 1e-3)), (s, name, spread)
+    for scale in net.nets[:-1]:
+        assert int(torch.count_nonzero(scale.crpm.head.fc2.weight[:3])) == 0
+
+
 def test_without_the_prior_an_untrained_network_is_at_cell_centres():
     torch.manual_seed(0)
     net = AGNDCCascade(AGNDCConfig(width=8, surface_nets_prior=False)).eval()

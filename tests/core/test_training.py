@@ -318,7 +318,7 @@ def test_state_is_sharded_under_the_file_limit_and_resumes(data_dir, tmp_path, m
 
 def test_warm_start_from_a_checkpoint_without_the_prior(data_dir, tmp_path):
     """A checkpoint that predicted absolute offsets starts a prior run: its weights are kept,
-    only the finest scale's vertex output restarts (at surface nets)."""
+    only the finest scale's last vertex layer restarts (at surface nets)."""
     from agndc_core.checkpoint import save_checkpoint
     from agndc_core.nn import AGNDCCascade, AGNDCConfig
 
@@ -333,6 +333,9 @@ def test_warm_start_from_a_checkpoint_without_the_prior(data_dir, tmp_path):
     head = new.nets[0].crpm.head.fc2
     assert int(torch.count_nonzero(head.weight[:3])) == 0 and torch.all(head.bias[:3] == 0.5)
     torch.testing.assert_close(head.weight[3:], old.nets[0].crpm.head.fc2.weight[3:])
+    # CRPM's inputs keep what they learned: only the last layer restarts
+    torch.testing.assert_close(new.nets[0].fdm.head.fc2.weight, old.nets[0].fdm.head.fc2.weight)
+    torch.testing.assert_close(new.nets[0].dffm.out.weight, old.nets[0].dffm.out.weight)
     torch.testing.assert_close(new.nets[1].fdm.convs[0].weight, old.nets[1].fdm.convs[0].weight)
 
 
