@@ -3,7 +3,8 @@
 # widths 16 and 32, trained from scratch on the same data with the same recipe, a checkpoint at
 # finest-scale steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3;
 # then UNDC 16 for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for
-# 1,000 steps (run in the tenth session: it stays at surface nets). Every point is scored as
+# 1,000 steps (run in the tenth session: it stays at surface nets), then UNDC and AGNDC 16 with
+# --binary-targets for 3,000 steps (seventh and eleventh sessions). Every point is scored as
 # remeshed and as contoured (runs "<name>_unfiltered"; the sixth session's points predate the
 # normal filter, so they are the contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
@@ -35,4 +36,12 @@ train agndc32 --model "{\"width\": 32, $agndc_model}" "${agndc_steps[@]}" || exi
 both_scores agndc32 agndc
 train agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 1000,100,100 --val-steps 300,1000 || exit 0
 both_scores agndc16_long agndc
+# the pair with --binary-targets (UNDC: seventh session; AGNDC: eleventh, after the last vertex
+# layer alone started at zero), same data, seed and 3,000-step schedule
+train bt_undc16_long --undc --model '{"width": 16}' --steps 3000 --val-steps 1000,2000,3000 \
+    --binary-targets || exit 0
+both_scores bt_undc16_long undc
+train bt_agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 3000,100,100 \
+    --val-steps 500,1000,2000,3000 --binary-targets || exit 0
+both_scores bt_agndc16_long agndc
 .venv/bin/python scripts/learning_curve_table.py "$runs"

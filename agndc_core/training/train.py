@@ -58,8 +58,8 @@ class TrainConfig:
     amp: bool = True  # bf16 autocast on CUDA (ignored on the CPU)
     workers: int = 0  # data-loader worker processes building crops (0: in the main process)
     # warm start: a checkpoint (.safetensors) of the same architecture whose weights start the
-    # run; if it predicted absolute offsets (no surface nets prior), its vertex heads restart
-    # at zero so the run starts exactly at surface nets
+    # run; if it predicted absolute offsets (no surface nets prior), its finest last vertex
+    # layer restarts at zero so the run starts exactly at surface nets
     init: str | None = None
     # the ``init`` checkpoint may differ from the model in the ablation switches (ABLATION_KEYS):
     # every tensor whose name and shape agree is loaded, the rest start fresh. Starts an
@@ -342,8 +342,8 @@ class Trainer:
         return {
             "recipe": "agndc_core.training (procedural shapes, training/data.py); finest scale: "
                       "correction to the surface nets vertex, no edge loss; loss only on cells "
-                      "with `margin` points of real context; zero-initialised vertex heads and "
-                      "snake offsets",
+                      "with `margin` points of real context; zero-initialised last vertex "
+                      "layers and snake offsets",
             "data": {"folder": self.cfg.data, "samples": len(self.samples),
                      "seeds": [int(min(x.recipe["seed"] for x in self.samples)),
                                int(max(x.recipe["seed"] for x in self.samples))],
