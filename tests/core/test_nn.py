@@ -198,8 +198,7 @@ def test_untrained_network_returns_surface_nets(kw):
 def test_crpm_sees_the_trunk_through_every_input_channel_at_initialisation():
     """Only the last layer before the vertex output starts at zero. CRPM reaches the trunk
     only through P'_s and W_s: had their vertex rows started at zero as well, two zero layers
-    in series would hold each other's gradients at zero and the cascade would not leave
-    surface nets (it did not, for 1,000 steps from scratch, before this was fixed)."""
+    in series would hold each other's gradients at zero."""
     torch.manual_seed(0)
     net = AGNDCCascade(AGNDCConfig(width=8)).eval()
     lattice = blob_lattice((24, 20, 16))
