@@ -6,13 +6,16 @@ Reads RUNS/eval_<run>_step-NNNNNN/rows.csv (64^3, grid alone) and prints one mar
 (run, step) beside the reference methods of the same resolution from the reference rows
 (marching cubes, surface nets, MC + Taubin, the oracles, the shipped networks), a table per
 mesh category, and the share of the MC→oracle headroom of CD and EF1. Step 0 of every run is
-surface nets: the runs start from zero vertex heads on the surface nets prior.
+surface nets: the runs start from zero vertex heads on the surface nets prior. A run warm-started
+(``--init``) from another run's checkpoint in RUNS counts its steps on from that checkpoint's, so
+a continued run's points lie on the same axis as the run it continues.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import re
 from pathlib import Path
@@ -33,6 +36,26 @@ def read_rows(path: Path, resolution: str = "64") -> list[dict]:
         for column in METRIC_COLUMNS + ("seconds",):
             row[column] = float(row[column]) if row[column] not in ("", None) else float("nan")
     return rows
+
+
+def steps_before(runs: Path, run: str) -> int:
+    """Finest-scale steps behind the start of ``run``: those of the checkpoint it was
+    warm-started from when that checkpoint is another run's in ``runs`` (followed back), else 0.
+    A scoring tag (``<run>_unfiltered``) names the same run."""
+    folder = runs / run
+    if not (folder / "run.json").exists() and run.endswith("_unfiltered"):
+        folder = runs / run.removesuffix("_unfiltered")
+    info = folder / "run.json"
+    init = json.loads(info.read_text())["config"].get("init") if info.exists() else None
+    if not init or Path(init).parent.resolve().parent != runs.resolve():
+        return 0
+    parent = Path(init).parent.name
+    match = re.fullmatch(r"step-(\d+)\.safetensors", Path(init).name)
+    if match:
+        done = int(match.group(1))
+    else:  # final.safetensors: the whole finest-scale schedule
+        done = json.loads((runs / parent / "run.json").read_text())["config"]["steps"][0]
+    return done + steps_before(runs, parent)
 
 
 def category_table(rows: list[dict]) -> str:
@@ -66,7 +89,8 @@ def main() -> int:
         match = re.fullmatch(r"eval_(.+)_step-(\d+)", folder.name)
         if not (match and (folder / "rows.csv").exists()):
             continue
-        run, step = match.group(1), int(match.group(2))
+        run = match.group(1)
+        step = int(match.group(2)) + steps_before(args.runs, run)
         curve = read_rows(folder / "rows.csv")
         missing = names - {r["name"] for r in curve}
         if missing:  # a mean over other meshes would not compare

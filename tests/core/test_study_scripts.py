@@ -45,3 +45,39 @@ def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path
             in calls
     # resumable: a finished evaluation (its rows.csv exists) is not run again
     assert _score(tmp_path, "both_scores full agndc") == calls
+
+
+def _table_script():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("learning_curve_table",
+                                                  REPO / "scripts" / "learning_curve_table.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_continued_run_counts_its_steps_on_from_the_checkpoint_it_started_from(tmp_path):
+    """learning_curve_table: a run warm-started from another run's step checkpoint (or its final
+    one) is placed after it on the step axis, followed back through chains; a run started from a
+    checkpoint outside the runs folder, or from nothing, starts at 0."""
+    import json
+
+    table = _table_script()
+    runs = tmp_path / "runs"
+
+    def run(name, init=None, steps=(3000, 100, 100)):
+        (runs / name).mkdir(parents=True)
+        config = {"init": None if init is None else str(init), "steps": list(steps)}
+        (runs / name / "run.json").write_text(json.dumps({"config": config}))
+
+    run("long")
+    run("cont", runs / "long" / "step-003000.safetensors", steps=(2400, 0, 0))
+    run("cont2", runs / "cont" / "final.safetensors", steps=(500, 0, 0))
+    run("elsewhere", tmp_path / "shipped" / "step-000700.safetensors")
+    assert table.steps_before(runs, "long") == 0
+    assert table.steps_before(runs, "cont") == 3000
+    assert table.steps_before(runs, "cont_unfiltered") == 3000
+    assert table.steps_before(runs, "cont2") == 5400
+    assert table.steps_before(runs, "elsewhere") == 0
+    assert table.steps_before(runs, "no_such_run") == 0
