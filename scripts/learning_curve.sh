@@ -5,7 +5,7 @@
 # then UNDC 16 for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for
 # 1,000 steps (run in the tenth session: it stays at surface nets), then UNDC and AGNDC 16 with
 # --binary-targets for 3,000 steps (seventh and eleventh sessions) and continued for 2,400 more
-# (twelfth). Every point is scored as remeshed and as contoured (runs "<name>_unfiltered"; the
+# with and without it (twelfth). Every point is scored as remeshed and as contoured (runs "<name>_unfiltered"; the
 # sixth session's points predate the normal filter, so they are the contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
 #   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=/work/data/v2_train
@@ -53,4 +53,13 @@ both_scores bt_agndc16_cont agndc
 train bt_undc16_cont --undc --model '{"width": 16}' --steps 2400 --val-steps 1200,2400 \
     --binary-targets --lr 5e-4 --seed 6 --init "$runs/bt_undc16_long/step-003000.safetensors" || exit 0
 both_scores bt_undc16_cont undc
+# the same continuation with the true targets (twelfth session: the curriculum that works): the
+# noise-free targets teach the start, the true depths what the faces' neighbours pin
+train dt_agndc16_cont --model "{\"width\": 16, $agndc_model}" --steps 2400,0,0 \
+    --val-steps 1200,2400 --lr 5e-4 --seed 6 \
+    --init "$runs/bt_agndc16_long/step-003000.safetensors" || exit 0
+both_scores dt_agndc16_cont agndc
+train dt_undc16_cont --undc --model '{"width": 16}' --steps 2400 --val-steps 1200,2400 \
+    --lr 5e-4 --seed 6 --init "$runs/bt_undc16_long/step-003000.safetensors" || exit 0
+both_scores dt_undc16_cont undc
 .venv/bin/python scripts/learning_curve_table.py "$runs"
