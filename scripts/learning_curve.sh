@@ -5,8 +5,9 @@
 # then UNDC 16 for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for
 # 1,000 steps (run in the tenth session: it stays at surface nets), then UNDC and AGNDC 16 with
 # --binary-targets for 3,000 steps (seventh and eleventh sessions) and continued for 2,400 more
-# with and without it (twelfth). Every point is scored as remeshed and as contoured (runs "<name>_unfiltered"; the
-# sixth session's points predate the normal filter, so they are the contoured ones).
+# with and without it (twelfth). Every point is scored as remeshed and as contoured (runs
+# "<name>_unfiltered"; the sixth session's points predate the normal filter, so they are the
+# contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
 #   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=/work/data/v2_train
 # Optional: AGNDC_CURVE_MINUTES caps each training call (it stops cleanly; run again to go on).
@@ -45,21 +46,22 @@ train bt_agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 3000,100,1
     --val-steps 500,1000,2000,3000 --binary-targets || exit 0
 both_scores bt_agndc16_long agndc
 # both continued for 2,400 more steps (twelfth session): a warm restart of the cosine schedule at
-# half the rate, new crops (seed 6), the coarse scales kept as they are
-train bt_agndc16_cont --model "{\"width\": 16, $agndc_model}" --steps 2400,0,0 \
-    --val-steps 1200,2400 --binary-targets --lr 5e-4 --seed 6 \
-    --init "$runs/bt_agndc16_long/step-003000.safetensors" || exit 0
+# half the rate, new crops (seed 6), the coarse scales kept as they are; first with the option,
+# then with the true targets (the curriculum that works: the noise-free targets teach the
+# start, the true depths what the faces' neighbours pin)
+continued=(--val-steps 1200,2400 --lr 5e-4 --seed 6)
+agndc_from=(--init "$runs/bt_agndc16_long/step-003000.safetensors")
+undc_from=(--init "$runs/bt_undc16_long/step-003000.safetensors")
+train bt_agndc16_cont --model "{\"width\": 16, $agndc_model}" --steps 2400,0,0 "${continued[@]}" \
+    "${agndc_from[@]}" --binary-targets || exit 0
 both_scores bt_agndc16_cont agndc
-train bt_undc16_cont --undc --model '{"width": 16}' --steps 2400 --val-steps 1200,2400 \
-    --binary-targets --lr 5e-4 --seed 6 --init "$runs/bt_undc16_long/step-003000.safetensors" || exit 0
+train bt_undc16_cont --undc --model '{"width": 16}' --steps 2400 "${continued[@]}" \
+    "${undc_from[@]}" --binary-targets || exit 0
 both_scores bt_undc16_cont undc
-# the same continuation with the true targets (twelfth session: the curriculum that works): the
-# noise-free targets teach the start, the true depths what the faces' neighbours pin
-train dt_agndc16_cont --model "{\"width\": 16, $agndc_model}" --steps 2400,0,0 \
-    --val-steps 1200,2400 --lr 5e-4 --seed 6 \
-    --init "$runs/bt_agndc16_long/step-003000.safetensors" || exit 0
+train dt_agndc16_cont --model "{\"width\": 16, $agndc_model}" --steps 2400,0,0 "${continued[@]}" \
+    "${agndc_from[@]}" || exit 0
 both_scores dt_agndc16_cont agndc
-train dt_undc16_cont --undc --model '{"width": 16}' --steps 2400 --val-steps 1200,2400 \
-    --lr 5e-4 --seed 6 --init "$runs/bt_undc16_long/step-003000.safetensors" || exit 0
+train dt_undc16_cont --undc --model '{"width": 16}' --steps 2400 "${continued[@]}" \
+    "${undc_from[@]}" || exit 0
 both_scores dt_undc16_cont undc
 .venv/bin/python scripts/learning_curve_table.py "$runs"
