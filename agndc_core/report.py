@@ -289,10 +289,17 @@ def _models_table(methods) -> str:
 
 def _trained_on(training: dict) -> str:
     """Where the last run's steps ran: its lineage entry's or the trainer's own record, up to the
-    first comma (checkpoints from before the trainer recorded it ran on the CPU VM)."""
+    first comma, each machine of a resumed run once (checkpoints from before the trainer
+    recorded it ran on the CPU VM)."""
     lineage = training.get("lineage") or [{}]
-    where = lineage[-1].get("hardware") or training.get("hardware") or "CPU"
-    return where.split(",")[0]
+    last = lineage[-1] if "hardware" in lineage[-1] or "sessions" in lineage[-1] else training
+    sessions = last.get("sessions") or [{"hardware": last.get("hardware") or "CPU"}]
+    kinds = []  # each machine once, in the order it ran (a run resumed elsewhere: several)
+    for entry in sessions:
+        kind = entry["hardware"].split(",")[0]
+        if kind not in kinds:
+            kinds.append(kind)
+    return " + ".join(kinds)
 
 
 def _lineage_total(training: dict) -> str:

@@ -26,9 +26,10 @@
 # STUDY is a file of lines "RUN [its own train options]" (# comments). Every run trains on the
 # same data with the common options and then its own (the last of a repeated option wins),
 # with 12 data-loader workers shared out. Each comes back as $OUT/RUN.tar (run.json, the log,
-# final.* when done, and the state shards while they keep the tar under 16 MiB): carry
-# `runs/RUN` and untar each into it (`tar -xf RUN.tar -C runs/RUN`). Common options start the
-# trainers, as for one run; without them a call only waits and copies.
+# final.* when done, and the state shards), split into RUN.tar.part0, part1, ... when it is
+# 16 MiB or more: carry `runs/RUN` and untar each into it (`cat RUN.tar* | tar -x -C
+# runs/RUN`). Common options start the trainers, as for one run; without them a call only
+# waits and copies.
 set -euo pipefail
 run=${1:?run name or @study file}; seconds=${2:?seconds to wait}; shift 2
 cd "$(dirname "$0")/.."
@@ -131,15 +132,16 @@ for name in $names; do
         cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
         cp "$work"/final.* "$OUT"/ 2>/dev/null || true
     elif [ -n "${OUT:-}" ]; then
-        files=$(cd "$work" && ls run.json train.log final.* 2>/dev/null || true)
-        shards=$(cd "$work" && ls state-*.safetensors 2>/dev/null || true)
-        size=$(cd "$work" && du -cb $files $shards 2>/dev/null | tail -n 1 | cut -f1)
-        # the state only while it fits: a lost machine then resumes; final.* always comes
-        if [ "${size:-0}" -lt $(( 16 * 1024 * 1024 - 65536 )) ]; then
-            files="$files $shards"
-        fi
+        files=$(cd "$work" && ls run.json train.log final.* state-*.safetensors 2>/dev/null || true)
         # shellcheck disable=SC2086
         (cd "$work" && tar -cf "$OUT/$name.tar" $files)
+        # a file comes back only under 16 MiB: a larger tar (a wide model's state) comes back
+        # in parts, RUN.tar.part0, part1, ... (`cat RUN.tar.part* > RUN.tar`); at most 8
+        # files come back in all
+        if [ "$(stat -c %s "$OUT/$name.tar")" -ge $(( 16 * 1024 * 1024 )) ]; then
+            split -b $(( 15 * 1024 * 1024 )) -d -a 1 "$OUT/$name.tar" "$OUT/$name.tar.part"
+            rm "$OUT/$name.tar"
+        fi
     fi
     alive "/tmp/agndc_runs/$name.pid" && echo "$name: trainer running" \
         || echo "$name: trainer not running"

@@ -127,6 +127,9 @@ class Trainer:
             self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels, cfg.workers)
         self.log: list[dict] = []
+        # each process that ran steps of this run: its hardware and where it began (a run
+        # resumed on another machine, e.g. started on the CPU and finished on a lent GPU)
+        self.sessions: list[dict] = []
         self.scale, self.step = levels, 0  # next step to run
         self.optimizer = self._optimizer(self.scale)
         self.ema = self._start_ema(self.scale)
@@ -267,6 +270,8 @@ class Trainer:
 
         levels = self.model_config.levels
         started = time.perf_counter()
+        self.sessions.append({"hardware": _hardware(self.device, self.cfg),
+                              "from": {"scale": self.scale, "step": self.step}})
         for s in reversed(range(levels + 1)):
             if s > self.scale:
                 continue  # finished before a resume
@@ -355,7 +360,8 @@ class Trainer:
             "steps_per_scale": list(self.cfg.steps),
             "train_seconds": round(self.seconds, 1),
             "data_wait_seconds": round(self.data_seconds, 1),
-            "hardware": _hardware(self.device, self.cfg),
+            "hardware": _hardware_of(self.sessions) or _hardware(self.device, self.cfg),
+            "sessions": self.sessions,
             "final_losses": [e for e in self.log if e["step"] == self.cfg.steps[e["scale"]]],
             "steps_done": {"scale": self.scale, "step": self.step},
             **({"warm_start": self.warm_start} if self.warm_start else {}),
@@ -387,7 +393,7 @@ class Trainer:
         info = {"config": asdict(self.cfg), "model_config": self.model_config.to_dict(),
                 "scale": self.scale, "step": self.step, "seconds": self.seconds,
                 "data_seconds": self.data_seconds,
-                "done": done, "log": self.log, **extra}
+                "done": done, "log": self.log, "sessions": self.sessions, **extra}
         (self.out / "run.json").write_text(json.dumps(info, indent=1))
 
     def resume(self) -> bool:
@@ -408,6 +414,10 @@ class Trainer:
         self.scale, self.step = info["scale"], info["step"]
         self.seconds, self.log = info["seconds"], info["log"]
         self.data_seconds = info.get("data_seconds", 0.0)
+        # a run.json from before the trainer kept its sessions: where its steps ran is unknown
+        unknown = [{"hardware": "not recorded", "from": {"scale": self.model_config.levels,
+                                                         "step": 0}}]
+        self.sessions = info.get("sessions", unknown)
         self.optimizer = self._optimizer(self.scale)
         self.ema = self._start_ema(self.scale)
         if self.ema is not None:
@@ -439,6 +449,16 @@ def _load_matching(model: torch.nn.Module, source: dict) -> dict:
 
     return {"loaded": len(shared), "fresh": modules(set(target) - set(shared)),
             "dropped": modules(set(source) - set(shared))}
+
+
+def _hardware_of(sessions: list[dict]) -> str:
+    """One line for a run's sessions: the hardware when one machine ran every step, else each
+    session's with the scale and step it began at."""
+    kinds = {entry["hardware"] for entry in sessions}
+    if len(kinds) <= 1:
+        return next(iter(kinds), "")
+    return "; ".join(f"{e['hardware']} from scale {e['from']['scale']} step {e['from']['step']}"
+                     for e in sessions)
 
 
 def _hardware(device: torch.device, cfg: TrainConfig) -> str:

@@ -216,6 +216,9 @@ def test_models_table_says_where_the_weights_were_trained():
     assert _lineage_total(gpu) == " (warm-started: 2 runs, 10 min of steps in all)"
     assert _trained_on({}) == "CPU" and _lineage_total({}) == ""
     assert _trained_on({"hardware": "CPU, 2 threads, torch 2.13"}) == "CPU"
+    resumed = {"sessions": [{"hardware": "CPU, 2 threads"}, {"hardware": "CPU, 2 threads"},
+                            {"hardware": "NVIDIA H200, bf16 autocast"}]}
+    assert _trained_on(resumed) == "CPU + NVIDIA H200"
 
 
 def test_demo_the_readme_opens_with(tmp_path, capsys):

@@ -300,6 +300,26 @@ def test_resume_is_bit_exact(data_dir, tmp_path):
         assert torch.equal(a, b), name
 
 
+def test_a_run_resumed_elsewhere_records_both_machines(data_dir, tmp_path):
+    """Steps run on one machine and finished on another (the CPU, then a lent GPU): the
+    checkpoint says where each part ran, not only the last machine's name."""
+    from agndc_core.checkpoint import load_checkpoint
+
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.threads, cfg.max_seconds = 2, 1e-9  # stops after its first step, the state saved
+    assert Trainer(cfg).run(progress=False) is None
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.threads = 1  # another machine, as far as the record can tell
+    second = Trainer(cfg)
+    assert second.resume()
+    _, meta = load_checkpoint(second.run(progress=False))
+    sessions = meta["training"]["sessions"]
+    assert [e["hardware"].split(",")[1].strip() for e in sessions] == ["2 threads", "1 threads"]
+    assert sessions[0]["from"] == {"scale": 2, "step": 0}
+    assert sessions[1]["from"] == {"scale": 2, "step": 1}
+    assert "from scale 2 step 1" in meta["training"]["hardware"]
+
+
 def test_state_is_sharded_under_the_file_limit_and_resumes(data_dir, tmp_path, monkeypatch):
     monkeypatch.setattr(train_module, "MAX_FILE_BYTES", 40_000)
     trainer = Trainer(_config(data_dir, tmp_path / "run"))
