@@ -123,6 +123,8 @@ class Trainer:
             for s in range(levels + 1)]).to(self.device)
         # what an --init-matching warm start loaded (None: a whole checkpoint, or none)
         self.warm_start: dict | None = None
+        # the training record of the --init checkpoint: the lineage these weights continue
+        self.init_training: dict | None = None
         if cfg.init:
             self._warm_start(cfg.init)
         self.samples = _load_folder(cfg.data, levels, cfg.workers)
@@ -140,7 +142,8 @@ class Trainer:
     def _warm_start(self, path: str) -> None:
         from ..checkpoint import load_checkpoint
 
-        source, _ = load_checkpoint(path)
+        source, meta = load_checkpoint(path)
+        self.init_training = meta.get("training") or {}
         mine, theirs = self.model_config.to_dict(), source.config.to_dict()
         differ = sorted(k for k in mine if k not in ("surface_nets_prior", "band_radius")
                         and mine[k] != theirs.get(k))
@@ -270,8 +273,9 @@ class Trainer:
 
         levels = self.model_config.levels
         started = time.perf_counter()
-        self.sessions.append({"hardware": _hardware(self.device, self.cfg),
-                              "from": {"scale": self.scale, "step": self.step}})
+        if self.scale > 0 or self.step < self.cfg.steps[0]:  # steps left to run here
+            self.sessions.append({"hardware": _hardware(self.device, self.cfg),
+                                  "from": {"scale": self.scale, "step": self.step}})
         for s in reversed(range(levels + 1)):
             if s > self.scale:
                 continue  # finished before a resume
@@ -343,8 +347,9 @@ class Trainer:
                                    training=self.training_record(), metrics=metrics)
 
     def training_record(self) -> dict:
-        """What a checkpoint says about how it was trained (data, recipe, steps, hardware)."""
-        return {
+        """What a checkpoint says about how it was trained (data, recipe, steps, hardware), and
+        its lineage: the runs it continues through ``--init``, oldest first, then this one."""
+        record = {
             "recipe": "agndc_core.training (procedural shapes, training/data.py); finest scale: "
                       "correction to the surface nets vertex, no edge loss; loss only on cells "
                       "with `margin` points of real context; zero-initialised last vertex "
@@ -366,6 +371,14 @@ class Trainer:
             "steps_done": {"scale": self.scale, "step": self.step},
             **({"warm_start": self.warm_start} if self.warm_start else {}),
         }
+        earlier = []
+        if self.init_training is not None:
+            earlier = (self.init_training.get("lineage")
+                       or [_lineage_entry(self.init_training, self.cfg.init)])
+        record["lineage"] = earlier + [_lineage_entry(record, self.cfg.out)]
+        record["total_train_seconds"] = round(sum(e.get("train_seconds", 0.0)
+                                                  for e in record["lineage"]), 1)
+        return record
 
     def finish(self, metrics: dict) -> Path:
         from ..checkpoint import save_checkpoint
@@ -449,6 +462,22 @@ def _load_matching(model: torch.nn.Module, source: dict) -> dict:
 
     return {"loaded": len(shared), "fresh": modules(set(target) - set(shared)),
             "dropped": modules(set(source) - set(shared))}
+
+
+#: the options a lineage entry keeps of each run (the rest are in that run's own record)
+LINEAGE_OPTIONS = ("init", "batch", "lr", "seed", "crop", "margin", "quadric_floor",
+                   "ema", "outside_crops", "random_phase", "binary_targets")
+
+
+def _lineage_entry(training: dict, run) -> dict:
+    """One run of a lineage, from its checkpoint's training record: what it trained on, how,
+    where and for how long."""
+    config = training.get("config") or {}
+    entry = {"run": str(run), **{k: config[k] for k in LINEAGE_OPTIONS if k in config}}
+    for key in ("data", "steps_per_scale", "train_seconds", "hardware", "sessions"):
+        if key in training:
+            entry[key] = training[key]
+    return entry
 
 
 def _hardware_of(sessions: list[dict]) -> str:

@@ -1,6 +1,7 @@
 """Training: exact crop augmentation, a short run that lowers the loss, and bit-exact resume."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -318,6 +319,27 @@ def test_a_run_resumed_elsewhere_records_both_machines(data_dir, tmp_path):
     assert sessions[0]["from"] == {"scale": 2, "step": 0}
     assert sessions[1]["from"] == {"scale": 2, "step": 1}
     assert "from scale 2 step 1" in meta["training"]["hardware"]
+
+
+def test_a_warm_started_checkpoint_carries_its_lineage(data_dir, tmp_path):
+    """Weights continued through --init say which runs they descend from, oldest first, and
+    how long all of them trained: shipped weights describe themselves without hand edits."""
+    from agndc_core.checkpoint import load_checkpoint
+
+    paths, records = [], []
+    for name, lr in (("first", 3e-3), ("second", 1e-3), ("third", 5e-4)):
+        cfg = _config(data_dir, tmp_path / name, steps=(2, 1, 1))
+        cfg.lr, cfg.init = lr, (str(paths[-1]) if paths else None)
+        paths.append(Trainer(cfg).run(progress=False))
+        records.append(load_checkpoint(paths[-1])[1]["training"])
+    lineage = records[-1]["lineage"]
+    assert [Path(e["run"]).name for e in lineage] == ["first", "second", "third"]
+    assert [e["lr"] for e in lineage] == [3e-3, 1e-3, 5e-4]
+    assert lineage[1]["init"] == str(paths[0]) and lineage[0]["init"] is None
+    assert lineage[:2] == records[1]["lineage"]  # each run extends its parent's lineage
+    assert records[-1]["total_train_seconds"] == pytest.approx(
+        sum(r["train_seconds"] for r in records), abs=0.2)
+    assert all(e["hardware"].startswith("CPU, ") for e in lineage)
 
 
 def test_state_is_sharded_under_the_file_limit_and_resumes(data_dir, tmp_path, monkeypatch):
