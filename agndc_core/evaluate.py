@@ -109,7 +109,7 @@ def method_checkpoint(checkpoints: dict, label: str, method: str):
     return checkpoints.get(label, checkpoints.get(method))
 
 
-def _placements(mesh_index: int, shifts: int) -> list[tuple]:
+def grid_placements(mesh_index: int, shifts: int) -> list[tuple]:
     """(shift column, sub-voxel shift) of every grid a mesh is scored on."""
     if not shifts:
         return [(None, (0.0, 0.0, 0.0))]  # the centred grid
@@ -149,7 +149,7 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
     check_shifts(shifts)
     rows = []
     jobs = [(path, kind, k, shift, method) for index, (path, kind) in enumerate(meshes)
-            for k, shift in _placements(index, shifts) for method in methods]
+            for k, shift in grid_placements(index, shifts) for method in methods]
     bar = tqdm(jobs, desc="eval", unit="run", disable=not progress)
     cache = {}
     for path, kind, k, shift, method in bar:
