@@ -2,7 +2,7 @@
 vertices, one class of cells at a time.
 
     python scripts/headroom_bound.py [DEV_FOLDER] [--res 64] [--shifts 0] [--checkpoint PATH]
-        [--alphas 0.75 0.5 0.25] [--limit N]
+        [--alphas 0.75 0.5 0.25] [--limit N] [--generated N]
 
 Each mesh is voxelised as ``agndc eval`` does (the centred grid, or ``--shifts K`` grids); the
 network (``--checkpoint``, default the shipped AGNDC) predicts its vertices, and each variant
@@ -46,10 +46,14 @@ from agndc_core.inference import predict_lattice
 from agndc_core.labels import binary_visible_vertex, crossed_edges, make_labels
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import orient_to_affine, remesh_mesh
+from agndc_core.shapes import generate_shape, shape_family
 from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.voxelize import voxelize
 
 CD_SCALE = 1e5  # CD×10⁵, as the reports print it
+#: first seed of ``--generated``: outside the training (0..) and validation (1,000,000..) ranges,
+#: as the shipped-weights test's held-out parts
+HELD_OUT_SEED0 = 7_000_001
 
 
 def variants(labels, network: np.ndarray, lattice: np.ndarray, alphas) -> dict:
@@ -84,6 +88,17 @@ def score_grid(vertices, faces, grid, model, alphas, n_samples: int) -> dict:
     return scores
 
 
+def shapes(args):
+    """Yield (name, category, (V, 3) vertices, (F, 3) faces): the dev meshes, or ``--generated``
+    held-out shapes of the training data's generator (category: the shape family)."""
+    if args.generated:
+        for seed in range(HELD_OUT_SEED0, HELD_OUT_SEED0 + args.generated):
+            yield f"seed{seed}", shape_family(seed), *generate_shape(seed)
+        return
+    for path, kind in require_meshes(Path(args.dev), args.limit):
+        yield (path.stem, kind, *load_mesh(path))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("dev", nargs="?", default="../shared/data/dev")
@@ -92,17 +107,19 @@ def main() -> None:
     parser.add_argument("--checkpoint", default=str(default_checkpoint_path("agndc")))
     parser.add_argument("--alphas", type=float, nargs="*", default=[0.75, 0.5, 0.25])
     parser.add_argument("--limit", type=int, default=None)
+    parser.add_argument("--generated", type=int, default=0, metavar="N",
+                        help="score N held-out generated shapes (seeds from 7,000,001, outside "
+                             "the training and validation ranges) instead of DEV_FOLDER")
     parser.add_argument("--samples", type=int, default=100_000)
     parser.add_argument("--threads", type=int, default=2)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     model, _ = load_checkpoint(args.checkpoint)
     rows = []
-    for index, (path, kind) in enumerate(require_meshes(Path(args.dev), args.limit)):
-        vertices, faces = load_mesh(path)
+    for index, (name, kind, vertices, faces) in enumerate(shapes(args)):
         for k, shift in grid_placements(index, args.shifts):
-            grid = voxelize(vertices, faces, args.res, shift=tuple(shift), source=path.name)
-            row = {"name": path.stem, "category": kind, "shift": k}
+            grid = voxelize(vertices, faces, args.res, shift=tuple(shift), source=name)
+            row = {"name": name, "category": kind, "shift": k}
             mc = remesh_mesh(vertices, faces, resolution=args.res, method="mc", shift=shift)
             row["mc"] = CD_SCALE * evaluate(mc.vertices, mc.faces, vertices, faces,
                                             n_samples=args.samples)["cd"]

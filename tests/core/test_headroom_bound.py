@@ -59,3 +59,17 @@ def test_an_axis_aligned_box_takes_the_network_depth_along_the_normal_only():
     np.testing.assert_allclose(half[moved], 0.05, atol=1e-6)
     # the converse keeps the network everywhere but there
     np.testing.assert_array_equal(out["true_depth"] != network, moved)
+
+
+def test_generated_shapes_are_held_out_seeds_named_by_family():
+    """--generated N scores the generator's own shapes from the held-out seed range."""
+    import argparse
+
+    from agndc_core.shapes import shape_family
+
+    script = _script()
+    args = argparse.Namespace(generated=2, dev="unused", limit=None)
+    found = list(script.shapes(args))
+    assert [name for name, *_ in found] == ["seed7000001", "seed7000002"]
+    assert [kind for _, kind, *_ in found] == [shape_family(7_000_001), shape_family(7_000_002)]
+    assert all(len(v) and len(f) for *_, v, f in found)
