@@ -104,7 +104,7 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               "the same method also given the mesh's bounding box, as `agndc remesh` and the "
               "Blender add-on do for mesh input (the faces that bound the shape are put on it, "
               "`flatpatches.snap_to_bounds`). That is information the grid does not hold, so the "
-              "ceilings and the issue's acceptance are about the plain rows. "
+              "ceilings and the quality targets are about the plain rows. "
               "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring "
               "+ filter; "
               f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
