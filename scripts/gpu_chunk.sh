@@ -1,25 +1,24 @@
 #!/usr/bin/env bash
-# One call of the device tool (`run`, <= 10 minutes) on the lent GPU machine, for a training run
-# that outlives the call:
+# One command (<= 10 minutes) on a GPU machine, for a training run that outlives the command:
 #
 #   bash scripts/gpu_chunk.sh RUN SECONDS [extra `agndc train` options...]
 #
-# The first call on a machine installs the carried wheels (.whl/), generates the procedural data
+# The first call on a machine installs the wheels sent with it (.whl/), generates the procedural data
 # with all 16 cores (seeded: every machine makes the same samples; AGNDC_SAMPLES, default 5000),
 # and starts `agndc train --device cuda --resume` in its own process session, so it keeps
-# training between calls while the machine is held. Its run folder is /tmp/agndc_runs/RUN,
-# seeded from the carried runs/RUN (the state of an earlier machine) when it is new. Every call
+# training between calls while the machine runs. Its run folder is /tmp/agndc_runs/RUN,
+# seeded from runs/RUN sent with the call (the state of an earlier machine) when it is new. Every call
 # then waits SECONDS (or until the trainer exits), copies run.json, the state shards (<= 15 MiB
 # each), final.* and the log to $OUT, and prints the log's tail. Later calls on the same machine
 # only wait and copy (their train options are ignored); on a fresh machine they resume. A call
 # without train options never starts a trainer; none starts once final.safetensors exists.
-# Carry `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
+# Send `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
 # AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
 # AGNDC_RESOLUTIONS=LO,HI: the training shapes' voxels on their longest side (default 32,128);
 # each range has its own data folder. The held-out samples stay 32-128 (comparable runs).
 #
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
-# kernels, not by the GPU, docs/training.md):
+# kernels, not by the GPU, docs/experiments/step-times.md):
 #
 #   bash scripts/gpu_chunk.sh @STUDY SECONDS [common `agndc train` options...]
 #
@@ -27,7 +26,7 @@
 # same data with the common options and then its own (the last of a repeated option wins),
 # with 12 data-loader workers shared out. Each comes back as $OUT/RUN.tar (run.json, the log,
 # final.* when done, and the state shards), split into RUN.tar.part0, part1, ... when it is
-# 16 MiB or more: carry `runs/RUN` and untar each into it (`cat RUN.tar* | tar -x -C
+# 16 MiB or more: send `runs/RUN` and untar each into it (`cat RUN.tar* | tar -x -C
 # runs/RUN`). Common options start the trainers, as for one run; without them a call only
 # waits and copies.
 set -euo pipefail

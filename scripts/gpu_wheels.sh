@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Run HERE (not on the GPU machine): download the Python 3.12 wheels the GPU machine lacks into
-# .whl/ (git-ignored through .git/info/exclude), for the device tool's `carry`. The GPU machine
+# .whl/ (git-ignored through .git/info/exclude), to send with each GPU command. The GPU machine
 # already has torch, numpy, scipy, scikit-image, safetensors and tqdm; data generation needs
 # manifold3d (the shape booleans), trimesh and rtree (labels: nearest points on the mesh). See docs/training.md.
 set -euo pipefail

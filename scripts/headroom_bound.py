@@ -25,7 +25,7 @@ below is dual-contoured on the grid's own edges with no flat-patch stage and no 
   (``--alphas``): how much better than the network those depths would have to be.
 
 Prints one JSON line per grid, then the means and each variant's share of the MC→oracle CD
-headroom (docs/training.md, session of 2026-11-26, fourteenth).
+headroom (docs/experiments/headroom-bound.md).
 """
 
 from __future__ import annotations

@@ -1,15 +1,14 @@
 #!/usr/bin/env bash
-# The learning-curve study of issue 11 (docs/training.md, "the learning-curve study"): UNDC and AGNDC at
-# widths 16 and 32, trained from scratch on the same data with the same recipe, a checkpoint at
-# finest-scale steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3;
-# then UNDC 16 for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for
-# 1,000 steps (run in the tenth session: it stays at surface nets), then UNDC and AGNDC 16 with
-# --binary-targets for 3,000 steps (seventh and eleventh sessions) and continued for 2,400 more
-# with and without it (twelfth). Every point is scored as remeshed and as contoured (runs
-# "<name>_unfiltered"; the sixth session's points predate the normal filter, so they are the
-# contoured ones).
+# The learning-curve study (docs/experiments/learning-curve.md): UNDC and AGNDC at widths 16 and
+# 32, trained from scratch on the same data with the same recipe, a checkpoint at finest-scale
+# steps 10, 30, 100, 300 (and 1000 for UNDC), each scored on the dev meshes at 64^3; then UNDC 16
+# for 3,000 steps (what a 3x longer run buys), AGNDC at width 32, and AGNDC 16 for 1,000 steps (it
+# stays at surface nets), then UNDC and AGNDC 16 with --binary-targets for 3,000 steps and
+# continued for 2,400 more with and without it (docs/experiments/binary-targets-curriculum.md).
+# Every point is scored as remeshed and as contoured (runs "<name>_unfiltered"; the points
+# quoted in docs/experiments/learning-curve.md are the contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
-#   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=/work/data/v2_train
+#   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=runs/data (agndc train-data -n 900)
 # Optional: AGNDC_CURVE_MINUTES caps each training call (it stops cleanly; run again to go on).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -37,15 +36,15 @@ train agndc32 --model "{\"width\": 32, $agndc_model}" "${agndc_steps[@]}" || exi
 both_scores agndc32 agndc
 train agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 1000,100,100 --val-steps 300,1000 || exit 0
 both_scores agndc16_long agndc
-# the pair with --binary-targets (UNDC: seventh session; AGNDC: eleventh, after the last vertex
-# layer alone started at zero), same data, seed and 3,000-step schedule
+# the pair with --binary-targets (AGNDC with only the last vertex layer started at zero), same
+# data, seed and 3,000-step schedule
 train bt_undc16_long --undc --model '{"width": 16}' --steps 3000 --val-steps 1000,2000,3000 \
     --binary-targets || exit 0
 both_scores bt_undc16_long undc
 train bt_agndc16_long --model "{\"width\": 16, $agndc_model}" --steps 3000,100,100 \
     --val-steps 500,1000,2000,3000 --binary-targets || exit 0
 both_scores bt_agndc16_long agndc
-# both continued for 2,400 more steps (twelfth session): a warm restart of the cosine schedule at
+# both continued for 2,400 more steps: a warm restart of the cosine schedule at
 # half the rate, new crops (seed 6), the coarse scales kept as they are; first with the option,
 # then with the true targets (the curriculum that works: the noise-free targets teach the
 # start, the true depths what the faces' neighbours pin)
