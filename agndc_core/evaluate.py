@@ -136,7 +136,7 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
             moved by ``grid_shifts`` instead (row column "shift" = 0..K-1): the centred grid
             puts the faces of the mesh's bounding box at fixed depths in their voxel layers,
             a cue real voxel data do not carry, and one grid per mesh leaves the means at the
-            mercy of each mesh's phase (docs/training.md, sessions of 2026-11-25).
+            mercy of each mesh's phase (docs/experiments/shifted-grid-evaluation.md).
         normal_filter: False scores the learned methods' meshes as contoured, without the
             bilateral normal filter (``pipeline.remesh``).
     """

@@ -7,7 +7,8 @@ cell by its own noise, and a flat face comes back crumpled. ``flatten_patches`` 
 cell of such a patch the patch's mean coordinate along the axis: the face is exactly flat, at
 the depth the network estimated on average. On the dev meshes at 64³ that beats the layer's
 midpoint (the network reads where faces lie from the shape around them); at 128³ the midpoint
-is slightly better, a gap for training on larger shapes to close (docs/training.md).
+is slightly better, a gap for training on larger shapes to close
+(docs/experiments/flat-patches.md).
 
 A **patch** is a set of cells in one layer, connected through shared cell faces within the
 layer, each a **pure split** along the axis: its four lower corners are inside and its four

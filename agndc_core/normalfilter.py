@@ -20,7 +20,7 @@ unchanged. ``filter_mesh`` is the vectorised entry; ``filter_mesh_naive`` is the
 correct reference that loops over faces and vertices (tests compare the two).
 
 The parameters (``NormalFilter``) were chosen on generated validation shapes (not the dev
-meshes); docs/training.md has the measurements.
+meshes); docs/experiments/normal-filter.md has the measurements.
 """
 
 from __future__ import annotations

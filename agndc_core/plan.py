@@ -32,10 +32,10 @@ MARGIN = 1
 #: points, fixed s), a non-negative least-squares fit to whole ``pipeline.remesh_mesh`` runs
 #: (voxelise, labels or network, contouring) of generated shapes 11 (CAD), 7 (organic) and 40
 #: (smooth) at 48³, 96³ and 144³ with 1 torch thread, on a 2-core Linux VM while a training job
-#: used most of the other core: ``python benchmarks/bench_estimate.py`` (2026-11-24; it prints this
-#: table). The fits are within -25..+35 % (agndc), -15..+52 % (undc), -19..+52 % (mc) and
-#: -57..+103 % (sharp, whose runs are short and were the noisiest) of the measured runs: the
-#: estimate says "about", not "exactly". More threads (an idle machine) make runs faster.
+#: used most of the other core: ``python benchmarks/bench_estimate.py`` (it prints this table).
+#: The fits are within -25..+35 % (agndc), -15..+52 % (undc), -19..+52 % (mc) and -57..+103 %
+#: (sharp, whose runs are short and were the noisiest) of the measured runs: the estimate says
+#: "about", not "exactly". More threads (an idle machine) make runs faster.
 #: "distance" is the Chamfer distance of one output to its source (30k samples), per output.
 CALIBRATION = {
     "agndc": (352.0, 0.307, 0.0),

@@ -1,4 +1,4 @@
-"""Geometric accuracy on analytic solids, in voxels: issue 11's targets for flat faces, sharp
+"""Geometric accuracy on analytic solids, in voxels: the quality targets for flat faces, sharp
 corners and smooth curvature, measured the same way by ``benchmarks/bench_geometry.py`` and the
 shipped-weights test.
 
@@ -25,7 +25,7 @@ from scipy.spatial import cKDTree
 
 from .pipeline import remesh_mesh
 
-#: issue 11's targets, in voxels (box RMS has none: a binary grid cannot place an axis-aligned
+#: the quality targets, in voxels (box RMS has none: a binary grid cannot place an axis-aligned
 #: face within its layer, see labels.binary_oracle_vertex)
 TARGETS = {"flatness": 0.05, "rotated_rms": 0.08, "corner": 0.5, "sphere": 0.08}
 BOX_EXTENTS = (1.0, 0.7, 0.5)

@@ -11,7 +11,7 @@ predictions back cell by cell and reports the RMS change of the surface cells' v
 voxels. ``face_phase_offsets`` says *where* a shift changes a flat face: it moves an axis-aligned
 box through every phase of the cascade's 2**levels grid and reports how far the network puts its
 two faces from surface nets' (which is exact there: the binary grid cannot say where in the
-voxel such a face lies). Measured numbers are in docs/training.md.
+voxel such a face lies). Measured numbers are in docs/experiments/flat-face-bias.md.
 """
 
 from __future__ import annotations

@@ -3,11 +3,11 @@
 #
 #   bash scripts/gpu_chunk.sh RUN SECONDS [extra `agndc train` options...]
 #
-# The first call on a machine installs the wheels sent with it (.whl/), generates the procedural data
-# with all 16 cores (seeded: every machine makes the same samples; AGNDC_SAMPLES, default 5000),
-# and starts `agndc train --device cuda --resume` in its own process session, so it keeps
-# training between calls while the machine runs. Its run folder is /tmp/agndc_runs/RUN,
-# seeded from runs/RUN sent with the call (the state of an earlier machine) when it is new. Every call
+# The first call on a machine installs the wheels sent with it (.whl/), generates the procedural
+# data with all 16 cores (seeded: every machine makes the same samples; AGNDC_SAMPLES, default
+# 5000), and starts `agndc train --device cuda --resume` in its own process session, so it keeps
+# training between calls while the machine runs. Its run folder is /tmp/agndc_runs/RUN, seeded
+# from runs/RUN sent with the call (the state of an earlier machine) when it is new. Every call
 # then waits SECONDS (or until the trainer exits), copies run.json, the state shards (<= 15 MiB
 # each), final.* and the log to $OUT, and prints the log's tail. Later calls on the same machine
 # only wait and copy (their train options are ignored); on a fresh machine they resume. A call

@@ -37,7 +37,8 @@ def add_train_parser(sub) -> None:
                    "use_dffm, use_crpm): load the tensors whose name and shape agree, start "
                    "the rest fresh (an ablation started from the full model)")
     p.add_argument("--max-minutes", type=float, help="save the state and stop after this much "
-                   "wall time (continue with --resume): chunks on a time-limited GPU lease")
+                   "wall time (continue with --resume): a run in chunks on a time-limited GPU "
+                   "machine")
     p.add_argument("--val-steps", default="", help="finest-scale steps after which a checkpoint "
                    "step-NNNNNN.safetensors is written and the --val samples are scored (the "
                    "points of a learning curve), e.g. 100,300,1000")
@@ -52,11 +53,11 @@ def add_train_parser(sub) -> None:
     p.add_argument("--random-phase", action="store_true", help="crops start at any point, "
                    "not on window boundaries: the network sees parts at every phase of its "
                    "pooling and attention windows (measured worse on the dev meshes: "
-                   "docs/training.md, cpu2)")
+                   "docs/experiments/frame-phase.md)")
     p.add_argument("--binary-targets", action="store_true", help="finest scale: on exactly "
                    "axis-aligned faces train towards the layer's midpoint (the oracle_binary "
                    "vertex), not the true depth (from scratch: better at equal steps; continuing "
-                   "a trained network: worse CD; docs/training.md)")
+                   "a trained network: worse CD; docs/experiments/binary-targets-curriculum.md)")
     p.add_argument("--batch", type=int, default=4)
     p.add_argument("--lr", type=float, default=2e-3)
     p.add_argument("--seed", type=int, default=0)

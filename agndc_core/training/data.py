@@ -116,7 +116,8 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
     (so a folder holds one resolution range: use a new folder for another).
 
     ``resolution_range`` (lo, hi): voxels on the longest side, log-uniform. The default stops at
-    128; dev meshes at 128³ suggest larger shapes are needed there (docs/training.md).
+    128; dev meshes at 128³ suggest larger shapes are needed there
+    (docs/experiments/flat-patches.md, docs/experiments/cpu-continuations.md).
     """
     from multiprocessing import get_context
 

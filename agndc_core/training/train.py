@@ -30,7 +30,8 @@ from ..surfacenets import surface_nets_lattice
 from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
 
-#: largest file the trainer writes (state shards included): what a GPU lease can bring back
+#: largest file the trainer writes (state shards included): under the 16 MiB a file returned from
+#: the GPU machine of the runbook may have (docs/training.md)
 MAX_FILE_BYTES = 15 * 2**20
 
 
@@ -63,14 +64,14 @@ class TrainConfig:
     init: str | None = None
     # the ``init`` checkpoint may differ from the model in the ablation switches (ABLATION_KEYS):
     # every tensor whose name and shape agree is loaded, the rest start fresh. Starts an
-    # ablation of Table 4 from the trained full model (docs/training.md); off by default, so a
-    # mistyped --model never silently drops half a warm start
+    # ablation of Table 4 from the trained full model (docs/experiments/table4-ablation.md); off
+    # by default, so a mistyped --model never silently drops half a warm start
     init_matching: bool = False
     # steps of the finest scale after which a checkpoint ``step-NNNNNN`` of the (averaged)
     # weights is written and the held-out samples are scored: the points of a learning curve
     val_steps: list = field(default_factory=list)
     # stop cleanly (state saved, ``--resume`` continues) once this much wall time has passed:
-    # one call on a lent GPU machine is limited to 10 minutes; None = no limit
+    # a command on the runbook's GPU machine is limited to 10 minutes; None = no limit
     max_seconds: float | None = None
     # weight of the plain squared vertex error beside the normal quadric (nn.loss): small lets a
     # vertex slide along its face, 1 pins it to the labelled (QEF) vertex as plain MSE does
@@ -85,17 +86,17 @@ class TrainConfig:
     # crops may start at any point of their scale instead of on a window boundary: the part then
     # meets the coarse scales' pooling and the attention windows at every phase, as a surface
     # anywhere in a user's grid does (aligned crops show a part's low faces at one phase only).
-    # Off by default: measured worse on the dev meshes (docs/training.md, fifth session of
-    # 2026-11-25, cpu2). Why is open: the guess that it hides a cue of voxelize's frame was
-    # measured and rejected (seventh session; gpu1 keeps its lead on shifted grids)
+    # Off by default: measured worse on the dev meshes (docs/experiments/frame-phase.md, cpu2).
+    # Why is open: the guess that it hides a cue of voxelize's frame was measured and rejected
+    # (gpu1 keeps its lead on shifted grids)
     random_phase: bool = False
     # on cells of exactly axis-aligned faces the finest scale's target coordinate along the
     # normal is the layer's midpoint (``labels.binary_visible_vertex``, the ``oracle_binary``
     # vertex), not the true depth: every depth in the layer leaves the same voxels there, so
-    # the true one is mostly noise to the network. Measured (docs/training.md, seventh session
-    # of 2026-11-25): from scratch better on all five dev metrics at equal steps; continuing a
-    # trained network with it loses CD, since a face's neighbours can pin its depth and this
-    # forbids learning that. Off by default
+    # the true one is mostly noise to the network. Measured
+    # (docs/experiments/binary-targets-curriculum.md): from scratch better on all five dev
+    # metrics at equal steps; continuing a trained network with it loses CD, since a face's
+    # neighbours can pin its depth and this forbids learning that. Off by default
     binary_targets: bool = False
 
 
@@ -130,7 +131,7 @@ class Trainer:
         self.samples = _load_folder(cfg.data, levels, cfg.workers)
         self.log: list[dict] = []
         # each process that ran steps of this run: its hardware and where it began (a run
-        # resumed on another machine, e.g. started on the CPU and finished on a lent GPU)
+        # resumed on another machine, e.g. started on the CPU and finished on a GPU)
         self.sessions: list[dict] = []
         self.scale, self.step = levels, 0  # next step to run
         self.optimizer = self._optimizer(self.scale)
@@ -481,8 +482,8 @@ def _lineage_entry(training: dict, run) -> dict:
 
 
 def _hardware_of(sessions: list[dict]) -> str:
-    """One line for a run's sessions: the hardware when one machine ran every step, else each
-    session's with the scale and step it began at."""
+    """One line for the processes that ran a run's steps: the hardware when one machine ran
+    every step, else each process's with the scale and step it began at."""
     kinds = {entry["hardware"] for entry in sessions}
     if len(kinds) <= 1:
         return next(iter(kinds), "")
@@ -501,8 +502,8 @@ def _hardware(device: torch.device, cfg: TrainConfig) -> str:
 
 def _load_folder(folder, levels: int, workers: int = 0) -> list[SparseSample]:
     """Samples of one folder, or of several separated by commas, in path order; read by
-    ``workers`` processes when > 1 (5,000 samples took ~2 min in one process on the GPU
-    machine, minutes of a 30-minute lease)."""
+    ``workers`` processes when > 1 (5,000 samples took ~2 min in one process on a GPU
+    machine)."""
     from functools import partial
 
     paths = sorted(p for f in str(folder).split(",") for p in Path(f).glob("sample_*.npz"))
