@@ -5,9 +5,9 @@
 # of it as the control. All four put the surface nets prior on the shipped weights, so their
 # finest vertex heads restart at zero and every variant starts exactly at surface nets (a
 # knocked-out module would otherwise leave the old head adding offsets that no longer fit:
-# vertex loss ~1000x the trained one). Then the same recipe and steps: C steps of scale 1 where the variant has one
-# (without CRPM scale 1 lost its CRPM too), then S of the finest scale. Each is scored on the dev
-# meshes at 64^3 as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the
+# vertex loss ~1000x the trained one). Then the same recipe and steps: C steps of scale 1 where
+# the variant has one (without CRPM scale 1 lost its CRPM too), then S of the finest scale. Each
+# is scored on the dev meshes at 64^3 as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the
 # network's own vertices; runs "<variant>_unfiltered"); the table is
 # scripts/learning_curve_table.py RUNS (rows "<variant> @ S").
 # What this measures: how fast each variant's trained features relearn the vertices, at equal
