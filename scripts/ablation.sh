@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
-# The paper's Table 4 rows on a CPU (docs/experiments/table4-ablation.md): none (the UNDC
-# baseline: one scale, plain convolutions), +GDFEM (one scale), +DFFM (no CRPM) start from the
-# shipped AGNDC with every tensor they share with it (--init-matching), the full model from all
-# of it as the control. All four put the surface nets prior on the shipped weights, so their
-# finest vertex heads restart at zero and every variant starts exactly at surface nets (a
-# knocked-out module would otherwise leave the old head adding offsets that no longer fit:
-# vertex loss ~1000x the trained one). Then the same recipe and steps: C steps of scale 1 where
-# the variant has one (without CRPM scale 1 lost its CRPM too), then S of the finest scale. Each
-# is scored on the dev meshes at 64^3 as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the
-# network's own vertices; runs "<variant>_unfiltered"); the table is
-# scripts/learning_curve_table.py RUNS (rows "<variant> @ S").
+# The paper's Table 4 rows on a CPU (docs/experiments/table4-ablation.md): none (the UNDC baseline:
+# one scale, plain convolutions), +GDFEM (one scale), +DFFM (no CRPM) start from the shipped AGNDC
+# with every tensor they share with it (--init-matching), the full model from all of it as the
+# control. All four put the surface nets prior on the shipped weights, so their finest vertex heads
+# restart at zero and every variant starts exactly at surface nets (a knocked-out module would
+# otherwise leave the old head adding offsets that no longer fit: vertex loss ~1000x the trained
+# one). Then the same recipe and steps: C steps of scale 1 where the variant has one (without CRPM
+# scale 1 lost its CRPM too), then S of the finest scale. Each is scored on the dev meshes at 64^3
+# as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the network's own vertices;
+# runs "<variant>_unfiltered"); the table is scripts/learning_curve_table.py RUNS
+# (rows "<variant> @ S").
 # What this measures: how fast each variant's trained features relearn the vertices, at equal
 # steps; not what retraining each variant from scratch would reach (a GPU's work).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues.
