@@ -4,25 +4,23 @@
     python build_addon.py                          # all platforms, Python 3.11 and 3.13 wheels
     python build_addon.py --platform linux-x64     # one platform (repeatable)
     python build_addon.py --python 3.11            # Blender 4.2-5.0 only (3.13: Blender 5.1+)
-    python build_addon.py --find-links /opt/wheels # offline torch: a folder with the +cpu wheel
+    python build_addon.py --find-links DIR         # offline: every wheel from local folders
     python build_addon.py --no-wheels              # developer build: code + weights only
     python build_addon.py --no-wheels --legacy     # + a legacy add-on zip (folder inside)
 
-Steps: (1) stage ``build/agndc_remesher/``: ``agndc_blender/*`` at the root, ``agndc_core/``
-vendored beside it (without ``training/``; shipped weights included), and a copy of
-``blender_manifest.toml`` whose ``platforms``/``wheels`` are filled in (the source manifest is
-never rewritten); (2) ``pip download`` the runtime wheels per platform and Python into
-``build/wheels/<platform>/<cpXY>/`` (numpy is left out because Blender ships it) and refuse any
-CUDA build of torch; (3) validate and build with Blender's own ``blender_ext.py`` (stdlib-only,
-shipped inside the ``bpy`` wheel, or ``--blender`` to use ``blender --command extension``) with
-``--split-platforms``; (4) validate every zip.
+Steps: (1) stage ``build/agndc_remesher/``: ``agndc_blender/*`` at the root and the product part
+of ``agndc_core/`` vendored beside it (``PRODUCT_MODULES``: I/O, voxeliser, the numpy inference
+runtime, contouring, filters; no training, evaluation, research or torch code) with the shipped
+weights, and a copy of ``blender_manifest.toml`` whose ``platforms``/``wheels`` are filled in
+(the source manifest is never rewritten); (2) ``pip download`` the runtime wheels per platform
+and Python into ``build/wheels/<platform>/<cpXY>/`` (numpy is left out because Blender ships it;
+torch and CUDA packages are refused: the networks run in numpy); (3) validate and build with
+Blender's own ``blender_ext.py`` (stdlib-only, shipped inside the ``bpy`` wheel, or
+``--blender`` to use ``blender --command extension``) with ``--split-platforms``; (4) validate
+every zip.
 
-Wheel sources. PyPI's Linux x86-64 torch is the CUDA build (``2.13.0+cu130`` inside, 527 MB,
-plus ``cuda-toolkit``, ``nvidia-*`` and ``triton`` wheels of several GB), so on linux-x64 torch
-comes from PyTorch's CPU index (``--torch-index``, default ``TORCH_CPU_INDEX``) or, offline,
-from ``--find-links`` folders only. PyPI's Windows and macOS torch wheels are CPU builds
-(checked in their metadata: ``torch/version.py`` says ``cuda = None``, no CUDA libraries, and
-every CUDA requirement is marked ``platform_system == "Linux"``), so they come from PyPI.
+Wheel sources: pip's configured index, or, with ``--find-links``, the given folders only
+(``--no-index``: nothing is fetched from the network).
 
 Two Pythons. Blender 4.2-5.0 embed CPython 3.11, Blender 5.1+ CPython 3.13. One zip carries
 both wheel sets: at install Blender keeps only the wheels whose platform and Python tags match
@@ -52,11 +50,6 @@ EXTENSION_ID = "agndc_remesher"
 
 #: target Python -> the Blender releases that embed it
 PYTHONS = {"3.11": "Blender 4.2-5.0", "3.13": "Blender 5.1+"}
-#: PyTorch's CPU-only wheel index (torch 2.13.0+cpu for every Python and platform it builds)
-TORCH_CPU_INDEX = "https://download.pytorch.org/whl/cpu"
-#: platforms whose PyPI torch is a CUDA build: torch comes from the CPU index (or --find-links)
-CPU_INDEX_PLATFORMS = ("linux-x64",)
-
 #: manifest platform -> the pip platform tags it accepts. pip does not widen an explicit
 #: --platform to older manylinux/macOS versions by itself, so list them.
 PLATFORM_TAGS = {
@@ -69,27 +62,37 @@ PLATFORM_TAGS = {
                     *[f"macosx_10_{minor}_universal2" for minor in range(15, 8, -1)]],
 }
 
-#: what agndc_core imports at run time in Blender (torch and the libraries imported by the
-#: remesh, grid-IO and metrics paths); numpy is Blender's own. rtree backs trimesh's closest-point
-#: query, which sharp mode's labels use for cells no surface sample fell into. manifold3d
-#: (training shapes only), tqdm (CLI only) and matplotlib are not needed inside Blender.
+#: what agndc_core imports at run time in Blender; numpy is Blender's own. scipy: distance
+#: transforms, sparse components, KD-trees; scikit-image: marching cubes; trimesh and rtree:
+#: Taubin smoothing and sharp mode's closest-point query; nibabel: NIfTI grids; threadpoolctl:
+#: one BLAS thread per inference worker. No torch: the networks run in numpy.
 RUNTIME_REQUIREMENTS = [
-    "torch==2.13.0",
     "scipy>=1.11",
     "scikit-image>=0.22",
     "trimesh>=4.0",
     "rtree>=1.0",
     "nibabel>=5.0",
-    "safetensors>=0.4",
+    "threadpoolctl>=3.1",
 ]
 #: resolution constraints per Python: pick wheels that work with the numpy Blender ships
 #: (Blender 4.2-5.0: numpy 1.x, bpy 4.5/5.0 pin numpy>=1.26,<2; bpy 5.2.3 (cp313) pins
 #: numpy>=2.2,<3)
 CONSTRAINTS = {"3.11": ["numpy>=1.24,<2"], "3.13": ["numpy>=2.2,<3"]}
-#: wheels dropped after download (Blender provides them)
-PROVIDED_BY_BLENDER = ("numpy",)
-#: projects that exist only for GPU (CUDA) builds of torch: never bundled
-CUDA_PROJECTS = re.compile(r"^(nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
+#: wheels dropped after download: Blender provides numpy; scikit-image's image I/O and graph
+#: dependencies are never imported by ``skimage.measure.marching_cubes`` (the add-on's only use;
+#: the Blender tests run against the installed zip without them)
+NOT_BUNDLED = ("numpy", "pillow", "imageio", "tifffile", "networkx")
+#: projects that must never be in the zip (the extension runs on the CPU without torch)
+REFUSED = re.compile(r"^(torch|nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
+#: the product part of agndc_core (vendored into the extension); everything else in it is the
+#: training and research wing. nn/ contributes only its torch-free config and layout.
+PRODUCT_MODULES = (
+    "__init__.py", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py", "labels.py",
+    "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
+    "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "formats", "runtime",
+    "weights",
+    "nn/__init__.py", "nn/config.py", "nn/layout.py",
+)
 
 EXCLUDE_PATTERNS = shutil.ignore_patterns("__pycache__", "*.pyc", ".*")
 
@@ -111,19 +114,13 @@ class UnresolvedError(BuildError):
 
 @dataclass
 class WheelSources:
-    """Where wheels come from: pip's configured indexes, plus local folders and, for the
-    platforms in CPU_INDEX_PLATFORMS, a CPU-only torch index (None: --find-links only)."""
+    """Where wheels come from: pip's configured indexes, or only the ``find_links`` folders."""
 
-    torch_index: str | None = TORCH_CPU_INDEX
     find_links: list[Path] = field(default_factory=list)
 
-    def pip_args(self, platform: str, project: str) -> list[str]:
+    def pip_args(self) -> list[str]:
         links = [arg for d in self.find_links for arg in ("--find-links", str(d))]
-        if project != "torch" or platform not in CPU_INDEX_PLATFORMS:
-            return links
-        if self.torch_index is None:  # offline: never fall back to PyPI's CUDA torch
-            return ["--no-index", *links]
-        return ["--index-url", self.torch_index, *links]
+        return ["--no-index", *links] if links else []
 
 
 def main(argv=None) -> int:
@@ -133,7 +130,7 @@ def main(argv=None) -> int:
     stage = stage_sources(args.build_dir / EXTENSION_ID)
     wheels: list[Path] = []
     if not args.no_wheels:
-        sources = WheelSources(torch_index=args.torch_index, find_links=args.find_links)
+        sources = WheelSources(find_links=args.find_links)
         for platform in platforms:
             per_python: dict[str, list[Path]] = {}
             for python in args.python:
@@ -171,14 +168,11 @@ def parse_args(argv):
     parser.add_argument("--python", type=parse_pythons, default=list(PYTHONS),
                         help="comma-separated target Pythons (default: 3.11,3.13; 3.11 = "
                              "Blender 4.2-5.0, 3.13 = Blender 5.1+)")
-    parser.add_argument("--torch-index", default=None, metavar="URL",
-                        help=f"CPU-only torch index for {', '.join(CPU_INDEX_PLATFORMS)} "
-                             f"(default: {TORCH_CPU_INDEX}, or none with --find-links)")
     parser.add_argument("--find-links", action="append", type=Path, default=[], metavar="DIR",
-                        help="also take wheels from this folder (repeatable); without "
-                             "--torch-index, the CPU torch wheel must be in one (offline build)")
+                        help="take every wheel from this folder (repeatable): an offline build, "
+                             "pip's index is not used")
     parser.add_argument("--no-wheels", action="store_true",
-                        help="developer build without bundled wheels (torch etc. must already "
+                        help="developer build without bundled wheels (scipy etc. must already "
                              "be importable in Blender); one zip for all platforms")
     parser.add_argument("--legacy", action="store_true",
                         help="also write <id>-<version>-legacy.zip, the same staged folder "
@@ -193,8 +187,6 @@ def parse_args(argv):
     missing = [str(d) for d in args.find_links if not d.is_dir()]
     if missing:
         parser.error(f"--find-links: not a folder: {', '.join(missing)}")
-    if args.torch_index is None and not args.find_links:
-        args.torch_index = TORCH_CPU_INDEX
     return args
 
 
@@ -215,12 +207,18 @@ def _manifest_version() -> str:
 
 
 def stage_sources(stage: Path) -> Path:
-    """Copy the add-on, the vendored core and its shipped weights into a clean staging folder."""
+    """Copy the add-on, the product part of the core and its shipped weights into a clean
+    staging folder."""
     if stage.exists():
         shutil.rmtree(stage)
     shutil.copytree(ROOT / "agndc_blender", stage, ignore=EXCLUDE_PATTERNS)
-    shutil.copytree(ROOT / "agndc_core", stage / "agndc_core",
-                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc", ".*", "training"))
+    for name in PRODUCT_MODULES:
+        source, dest = ROOT / "agndc_core" / name, stage / "agndc_core" / name
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        if source.is_dir():
+            shutil.copytree(source, dest, ignore=EXCLUDE_PATTERNS)
+        else:
+            shutil.copy2(source, dest)
     return stage
 
 
@@ -257,9 +255,7 @@ def download_consistent(platform: str, python: str, sources: WheelSources, cache
         return download_wheels(platform, python, sources, cache)
     try:
         return download_wheels(platform, python, sources, cache, pins=pins)
-    except UnresolvedError as error:
-        if error.requirements == RUNTIME_REQUIREMENTS[:1]:
-            raise  # torch itself is missing: the pins do not matter
+    except UnresolvedError:
         print(f"[{platform} {python}] the versions shared with Python "
               f"{', '.join(earlier)} do not resolve; resolving again without them", flush=True)
         return download_wheels(platform, python, sources, cache)
@@ -267,31 +263,21 @@ def download_consistent(platform: str, python: str, sources: WheelSources, cache
 
 def download_wheels(platform: str, python: str, sources: WheelSources, cache: Path, *,
                     pins=()) -> list[Path]:
-    """Runtime wheels (with dependencies, minus Blender's own) for one platform and Python.
+    """Runtime wheels (with dependencies, minus ``NOT_BUNDLED``) for one platform and Python.
 
-    pip evaluates environment markers for the machine it runs on, not for ``--platform``, so on
-    Linux it would ask for torch's CUDA wheels even for Windows. torch is therefore fetched
-    without dependencies, checked to be a CPU build, and its ``Requires-Dist`` is evaluated for
-    the target platform and Python here. The folder is emptied first, so only this run's
-    resolution is bundled (pip's own cache keeps repeated builds from downloading again).
-    ``pins`` are extra constraints (``project==version``).
+    The folder is emptied first, so only this run's resolution is bundled (pip's own cache
+    keeps repeated builds from downloading again). ``pins`` are extra constraints
+    (``project==version``).
     """
     dest = cache / f"cp{python.replace('.', '')}"
     if dest.exists():
         shutil.rmtree(dest)
     dest.mkdir(parents=True)
-    torch_req, others = RUNTIME_REQUIREMENTS[0], RUNTIME_REQUIREMENTS[1:]
     print(f"[{platform} {python}] pip download {' '.join(RUNTIME_REQUIREMENTS)}", flush=True)
-    constraints = [*CONSTRAINTS[python], *pins]
-    _pip_download(platform, python, dest, [torch_req], sources.pip_args(platform, "torch"),
-                  constraints, deps=False)
-    (torch_wheel,) = dest.glob("torch-*.whl")
-    torch_deps = _requirements_for(torch_wheel, platform, python)
-    check_cpu_only([torch_wheel], platform, python, requirements=torch_deps)
-    _pip_download(platform, python, dest, others + torch_deps,
-                  sources.pip_args(platform, "deps"), constraints, deps=True)
-    wheels = [w for w in sorted(dest.glob("*.whl")) if _project(w) not in PROVIDED_BY_BLENDER]
-    check_cpu_only(wheels, platform, python)
+    _pip_download(platform, python, dest, RUNTIME_REQUIREMENTS, sources.pip_args(),
+                  [*CONSTRAINTS[python], *pins])
+    wheels = [w for w in sorted(dest.glob("*.whl")) if _project(w) not in NOT_BUNDLED]
+    check_no_torch(wheels, platform, python)
     misfits = [w.name for w in wheels if not fits(w.name, platform, python)]
     if misfits:
         raise BuildError(f"{platform}, Python {python}: pip returned wheels Blender would not "
@@ -302,12 +288,11 @@ def download_wheels(platform: str, python: str, sources: WheelSources, cache: Pa
 
 
 def pip_download_command(platform: str, python: str, dest: Path, requirements: list[str],
-                         source_args: list[str], *, deps: bool, constraints: Path) -> list[str]:
+                         source_args: list[str], *, constraints: Path) -> list[str]:
     """The ``pip download`` command line for one platform and target Python."""
     command = [sys.executable, "-m", "pip", "download", "--disable-pip-version-check",
                "--only-binary=:all:", "--python-version", python, "--implementation", "cp",
                "--dest", str(dest), "-c", str(constraints), *source_args]
-    command += [] if deps else ["--no-deps"]
     for tag in PLATFORM_TAGS[platform]:
         command += ["--platform", tag]
     for abi in abis(python):
@@ -321,12 +306,12 @@ def abis(python: str) -> list[str]:
 
 
 def _pip_download(platform: str, python: str, dest: Path, requirements: list[str],
-                  source_args: list[str], constraint_lines: list[str], *, deps: bool) -> None:
+                  source_args: list[str], constraint_lines: list[str]) -> None:
     with tempfile.TemporaryDirectory() as folder:
         constraints = Path(folder) / "constraints.txt"
         constraints.write_text("\n".join(constraint_lines) + "\n")
         command = pip_download_command(platform, python, dest, requirements, source_args,
-                                       deps=deps, constraints=constraints)
+                                       constraints=constraints)
         result = subprocess.run(command, stderr=subprocess.PIPE, text=True)
     sys.stderr.write(result.stderr)
     if result.returncode != 0:
@@ -337,57 +322,21 @@ def _pip_download(platform: str, python: str, dest: Path, requirements: list[str
 def unresolved_message(platform: str, python: str, requirements: list[str], stderr: str) -> str:
     """Why a wheel set could not be resolved, and the two ways out."""
     reason = [line for line in stderr.splitlines() if line.startswith("ERROR")][:2]
-    torch_hint = ""
-    if platform in CPU_INDEX_PLATFORMS and any(r.startswith("torch") for r in requirements):
-        torch_hint = (f" (torch for {platform} comes only from --torch-index or --find-links "
-                      "folders: it needs the +cpu wheel for this Python)")
     return (f"cannot resolve the wheels for {platform}, Python {python} ({PYTHONS[python]}): "
-            f"{' '.join(requirements)}{torch_hint}. pip: {' / '.join(reason) or 'see above'}. "
+            f"{' '.join(requirements)}. pip: {' / '.join(reason) or 'see above'}. "
             f"Build without that Python (e.g. --python 3.11) or pass a folder that holds the "
             f"missing wheels with --find-links DIR.")
 
 
 # -- checks ------------------------------------------------------------------------------------
 
-def check_cpu_only(wheels, platform: str, python: str, requirements=()) -> None:
-    """Refuse a CUDA build of torch: a ``+cu…``/``+rocm…`` local version, a torch whose
-    ``torch/version.py`` names a CUDA version, or any CUDA-only project (``nvidia-*``,
-    ``cuda-*``, ``triton``) among the wheels or torch's requirements for the target.
-
-    Args:
-        wheels: wheel paths (or file names; only existing files are opened).
-        requirements: extra requirement strings (torch's ``Requires-Dist`` for the target).
-    """
-    reasons = []
-    for wheel in map(Path, wheels):
-        project, version = _project(wheel), _version(wheel)
-        if CUDA_PROJECTS.match(project):
-            reasons.append(f"{wheel.name} is a CUDA-only package")
-        elif project == "torch" and re.search(r"\+(cu|rocm)", version):
-            reasons.append(f"{wheel.name} is a GPU build (local version +{version.split('+')[1]})")
-        elif project == "torch" and wheel.is_file() and (cuda := torch_cuda_version(wheel)):
-            reasons.append(f"{wheel.name} is a CUDA {cuda} build (torch/version.py)")
-    for requirement in requirements:
-        name = re.split(r"[\s\[<>=!~;]", requirement.strip(), maxsplit=1)[0].lower()
-        if CUDA_PROJECTS.match(name.replace("_", "-")):
-            reasons.append(f"torch requires {requirement}")
-    if reasons:
-        raise BuildError(
-            f"refusing to bundle a CUDA build of torch for {platform}, Python {python}: "
-            + "; ".join(reasons) + ". The extension runs on the CPU: take torch from PyTorch's "
-            f"CPU index (--torch-index {TORCH_CPU_INDEX}) or from a folder holding the "
-            "torch-2.13.0+cpu wheel (--find-links DIR).")
-
-
-def torch_cuda_version(wheel: Path) -> str | None:
-    """The CUDA version a torch wheel was built for (``torch/version.py``), None for CPU."""
-    with zipfile.ZipFile(wheel) as archive:
-        try:
-            text = archive.read("torch/version.py").decode("utf-8")
-        except KeyError:
-            return None
-    match = re.search(r"(?m)^cuda\b[^=]*=\s*['\"]([^'\"]+)['\"]", text)
-    return match.group(1) if match else None
+def check_no_torch(wheels, platform: str, python: str) -> None:
+    """Refuse torch and CUDA packages: the extension runs its networks in numpy."""
+    refused = [Path(w).name for w in wheels if REFUSED.match(_project(w))]
+    if refused:
+        raise BuildError(f"{platform}, Python {python}: refusing to bundle {', '.join(refused)}: "
+                         "the extension runs its networks without torch (agndc_core/runtime); "
+                         "a dependency that pulls torch in must not be a runtime requirement")
 
 
 def _wheel_tags(name: str) -> tuple[list[str], list[str], list[str]]:
@@ -462,36 +411,6 @@ def requires_python(wheel: Path) -> str:
         text = archive.read(names[0]).decode("utf-8") if names else ""
     match = re.search(r"(?m)^Requires-Python:\s*(.+?)\s*$", text)
     return match.group(1) if match else ""
-
-
-#: environment-marker values of each target platform (PEP 508)
-MARKER_ENVIRONMENTS = {
-    "linux-x64": {"sys_platform": "linux", "platform_system": "Linux",
-                  "platform_machine": "x86_64", "os_name": "posix"},
-    "windows-x64": {"sys_platform": "win32", "platform_system": "Windows",
-                    "platform_machine": "AMD64", "os_name": "nt"},
-    "macos-arm64": {"sys_platform": "darwin", "platform_system": "Darwin",
-                    "platform_machine": "arm64", "os_name": "posix"},
-}
-
-
-def _requirements_for(wheel: Path, platform: str, python: str) -> list[str]:
-    """The wheel's Requires-Dist that apply on ``platform`` with CPython ``python`` (no extras)."""
-    Requirement = _packaging("requirements").Requirement
-    environment = {"python_version": python, "python_full_version": f"{python}.0",
-                   "implementation_name": "cpython", "platform_python_implementation": "CPython",
-                   "extra": "", **MARKER_ENVIRONMENTS[platform]}
-    with zipfile.ZipFile(wheel) as archive:
-        (metadata,) = [n for n in archive.namelist() if n.endswith(".dist-info/METADATA")]
-        lines = archive.read(metadata).decode("utf-8").splitlines()
-    requirements = []
-    for line in lines:
-        if line.startswith("Requires-Dist:"):
-            requirement = Requirement(line.split(":", 1)[1].strip())
-            if requirement.marker is None or requirement.marker.evaluate(environment):
-                requirement.marker = None
-                requirements.append(str(requirement))
-    return list(dict.fromkeys(requirements))
 
 
 def _packaging(module: str):

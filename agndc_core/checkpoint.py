@@ -2,18 +2,20 @@
 
 The JSON sidecar holds ``format_version``, ``model_config`` (``AGNDCConfig.to_dict``), the
 parameter count, the training recipe, metrics, and the sha256 of the weights file. Loading never
-unpickles: the weights are read with ``safetensors.torch.load_file``, the config with ``json``,
-and both are checked (hash, keys, shapes) before the network is built, so a wrong or damaged file
-gives a ``ModelError`` naming the problem instead of a broken model.
+unpickles: the weights are read with ``safetensors`` (torch) or ``read_safetensors`` (numpy, the
+inference runtime), the config with ``json``, and both are checked (hash, keys, shapes) before
+the network is built, so a wrong or damaged file gives a ``ModelError`` naming the problem
+instead of a broken model. Only ``save_checkpoint`` and ``load_checkpoint`` need torch.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import struct
 from pathlib import Path
 
-import torch
+import numpy as np
 
 from .errors import ModelError
 
@@ -75,7 +77,29 @@ def load_checkpoint(path):
     """
     from safetensors.torch import load_file
 
-    from .nn import AGNDCCascade, AGNDCConfig
+    from .nn import AGNDCCascade
+
+    weights, meta, config = read_checkpoint_metadata(path)
+    model = AGNDCCascade(config)
+    try:
+        state = load_file(str(weights))
+    except Exception as exc:  # safetensors raises its own errors for malformed files
+        raise ModelError(f"cannot read weights {weights}: {exc}") from None
+    _check_state(state, model.state_dict(), weights)
+    model.load_state_dict(state, strict=True)
+    return model.eval(), meta
+
+
+def read_checkpoint_metadata(path):
+    """The checked metadata of a checkpoint, without reading its tensors (no torch).
+
+    Returns:
+        (weights path, metadata dict, ``AGNDCConfig``).
+
+    Raises:
+        ModelError: missing files, bad JSON, unknown format version, hash mismatch, bad config.
+    """
+    from .nn.config import AGNDCConfig
 
     weights, sidecar = _paths(path)
     if not weights.exists():
@@ -102,15 +126,37 @@ def load_checkpoint(path):
     if isinstance(model_config, dict) and "surface_nets_prior" not in model_config:
         # written before the prior existed: those networks predict absolute offsets
         model_config = {**model_config, "surface_nets_prior": False}
-    config = AGNDCConfig.from_dict(model_config)
-    model = AGNDCCascade(config)
+    return weights, meta, AGNDCConfig.from_dict(model_config)
+
+
+#: safetensors dtype names -> numpy dtypes (the checkpoints hold float32 only)
+_SAFETENSORS_DTYPES = {"F32": np.float32, "F64": np.float64, "F16": np.float16,
+                       "I64": np.int64, "I32": np.int32}
+
+
+def read_safetensors(path) -> dict[str, np.ndarray]:
+    """All tensors of a ``.safetensors`` file as numpy arrays (the format: an 8-byte
+    little-endian header length, a JSON header of dtype, shape and byte range per tensor, then
+    the raw little-endian data). Raises ModelError on a malformed file."""
+    path = Path(path)
     try:
-        state = load_file(str(weights))
-    except Exception as exc:  # safetensors raises its own errors for malformed files
-        raise ModelError(f"cannot read weights {weights}: {exc}") from None
-    _check_state(state, model.state_dict(), weights)
-    model.load_state_dict(state, strict=True)
-    return model.eval(), meta
+        data = path.read_bytes()
+        (n,) = struct.unpack("<Q", data[:8])
+        header = json.loads(data[8:8 + n])
+        tensors = {}
+        for name, info in header.items():
+            if name == "__metadata__":
+                continue
+            begin, end = info["data_offsets"]
+            dtype = np.dtype(_SAFETENSORS_DTYPES[info["dtype"]]).newbyteorder("<")
+            count = int(np.prod(info["shape"], dtype=np.int64))
+            if end - begin != count * dtype.itemsize or 8 + n + end > len(data):
+                raise ValueError(f"tensor {name}: byte range does not match its shape")
+            array = np.frombuffer(data, dtype=dtype, count=count, offset=8 + n + begin)
+            tensors[name] = array.astype(dtype.newbyteorder("="), copy=True).reshape(info["shape"])
+    except (OSError, ValueError, KeyError, TypeError, struct.error) as exc:
+        raise ModelError(f"cannot read weights {path}: {exc}") from None
+    return tensors
 
 
 def _check_state(state: dict, expected: dict, weights: Path) -> None:
@@ -151,6 +197,6 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def count_parameters(model: torch.nn.Module) -> int:
+def count_parameters(model) -> int:
     """Number of learnable parameters."""
     return int(sum(p.numel() for p in model.parameters()))

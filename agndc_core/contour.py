@@ -123,7 +123,7 @@ def _patch_tables():
         patch: (256, 12) int8 patch of each cell edge (-1: not crossed);
         count: (256,) int64 number of patches;
         shift: (256, P, 3) float64 the patch's surface-nets point (mean of its crossed-edge
-            midpoints) minus the whole cell's surface-nets offset as ``surface_nets_offsets``
+            midpoints) minus the whole cell's surface-nets offset as ``surface_nets_lattice``
             computes it (float32);
         joined: (256, 6) bool, face 2 n + side is ambiguous (4 crossed edges) and its two inside
             corners are in one inside component of the cell.

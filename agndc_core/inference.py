@@ -1,6 +1,9 @@
 """Fast inference: padded lattice -> per-point dual vertices and edge probabilities.
 
-Two paths over the same network:
+Two runtimes run the same checkpoint: the numpy one (``runtime/``, a ``runtime.Network``: the
+CPU default of the CLI, the batch script and the Blender extension, no torch needed) and torch
+(an ``nn.AGNDCCascade``: training, CUDA, and the reference the numpy one is tested against).
+``predict_lattice`` takes either. Two paths over the same network:
 
 * ``mode="band"`` (default): every scale is evaluated on the band of lattice points within
   ``config.band_radius`` of the surface (``nn/band_ops.py``); far points take the far-field
@@ -15,21 +18,20 @@ points at its own scale) for one network only, never for the whole cascade. Tile
 multiples of the windows and far-field periods, so a tile sees exactly the same lattice
 positions as the whole lattice does; only information from beyond the halo is lost.
 
-Progress and cancellation reach *inside* each tile: while the network runs, a thread-local
-``torch.overrides.TorchFunctionMode`` sees every torch call, checks ``cancel`` on each one and
-reports progress at most every ``PROGRESS_INTERVAL`` seconds, interpolated within the tile from
-its share of the surface (the band's size) and the speed measured on the tiles before it.
+Progress and cancellation reach *inside* each tile: the numpy network calls the reporter
+between layers and between chunks of rows; for torch, a thread-local ``TorchFunctionMode``
+sees every torch call. Each call checks ``cancel`` and reports progress at most every
+``PROGRESS_INTERVAL`` seconds, interpolated within the tile from its share of the surface (the
+band's size) and the speed measured on the tiles before it. This module does not load
+torch.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from contextlib import nullcontext
 
 import numpy as np
-import torch
-from torch.overrides import TorchFunctionMode
 
 from .errors import AGNDCError, CancelledError, GridError
 from .grid import LATTICE_PAD, occupancy_pyramid, pad_to_lattice
@@ -89,29 +91,53 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     if window is not None:
         return _predict_window(model, lattice, window, mode=mode, tile=tile, progress=progress,
                                cancel=cancel, device=device, band_radius=band_radius)
-    if device is not None:
-        model.to(device)
-    model.eval()
+    numpy_net = getattr(model, "backend", None) == "numpy"
+    if numpy_net and (mode == "dense" or device not in (None, "cpu")):
+        raise AGNDCError("the numpy runtime evaluates the band on the CPU only; load the "
+                         "checkpoint with torch (checkpoint.load_checkpoint) for mode='dense' "
+                         "or a CUDA device")
+    if not numpy_net:
+        if device is not None:
+            model.to(device)
+        model.eval()
     step = 2 ** model.levels
     shape = lattice.shape
     padded = np.pad(lattice, [(0, -n % step) for n in shape], mode="edge")
     report = _Reporter(progress, cancel)
-    watch = _Watch(report) if progress is not None or cancel is not None else nullcontext()
-    with torch.inference_mode(), watch:
-        if mode == "dense":
-            report(0.0, "AGNDC dense")
-            g = torch.from_numpy(padded)[None].to(next(model.parameters()).device)
-            pred = model(g)[0][0].permute(1, 2, 3, 0)
-        else:
-            if tile is None:
-                tile = AUTO_TILE if padded.size > AUTO_TILE_LIMIT else 0
+    if mode == "dense":
+        pred = _predict_dense(model, padded, report)
+    else:
+        if tile is None:
+            tile = AUTO_TILE if padded.size > AUTO_TILE_LIMIT else 0
+        with _running(model, report):
             pred = _predict_band(model, padded, band_radius, int(tile), report)
         report.segment(0.95, 0.95, "AGNDC output")
-        pred = pred[:shape[0], :shape[1], :shape[2]].float()
-        vertex = pred[..., :3].clamp(0.0, 1.0).cpu().numpy()
-        edge_prob = torch.sigmoid(pred[..., 3:]).cpu().numpy()
+    pred = _to_numpy(pred)[:shape[0], :shape[1], :shape[2]]
+    vertex = np.clip(pred[..., :3], 0.0, 1.0)
+    edge_prob = (1.0 / (1.0 + np.exp(-pred[..., 3:]))).astype(np.float32)
     report(1.0, "AGNDC done")
     return np.ascontiguousarray(vertex), np.ascontiguousarray(edge_prob)
+
+
+def _running(model, report):
+    """The context a band evaluation runs in: the reporter reached from inside the network."""
+    if getattr(model, "backend", None) == "numpy":
+        return model.running(report.tick)
+    from .nn.torch_inference import running
+
+    return running(report)
+
+
+def _predict_dense(model, padded, report):
+    from .nn.torch_inference import predict_dense
+
+    return predict_dense(model, padded, report)
+
+
+def _to_numpy(pred) -> np.ndarray:
+    if isinstance(pred, np.ndarray):
+        return pred.astype(np.float32, copy=False)
+    return pred.float().cpu().numpy()
 
 
 def trained_window(lattice: np.ndarray):
@@ -157,7 +183,7 @@ def _predict_window(model, lattice, window, **options):
     return vertex, edge_prob
 
 
-def _predict_band(model, lattice: np.ndarray, radius, tile: int, report) -> torch.Tensor:
+def _predict_band(model, lattice: np.ndarray, radius, tile: int, report):
     """(X, Y, Z, 6) scale-0 prediction by band evaluation, tiled scale by scale."""
     levels, cfg = model.levels, model.config
     grids = occupancy_pyramid(lattice, levels)
@@ -184,7 +210,8 @@ def _predict_band(model, lattice: np.ndarray, radius, tile: int, report) -> torc
                                          out_radius=1 if s == 0 else None)
             dense = ops.to_dense(rows)
             if out is None:
-                out = dense.new_empty(*grid.shape, 6)
+                out = (np.empty((*grid.shape, 6), dtype=np.float32) if isinstance(dense, np.ndarray)
+                       else dense.new_empty(*grid.shape, 6))
             local = tuple(slice(c.start - r.start, c.stop - r.start) for c, r in zip(core, region))
             out[core] = dense[local]
             torus = rows[:ops.torus]
@@ -247,13 +274,14 @@ class _Reporter:
     """Forwards progress and raises CancelledError when ``cancel`` is set.
 
     ``segment`` starts a piece of work that spans [lo, hi] of the whole; ``tick`` (called on every
-    torch call by ``_Watch``) checks cancellation and, every ``PROGRESS_INTERVAL`` s, reports a
+    call from inside the network) checks cancellation and, every ``PROGRESS_INTERVAL`` s, reports a
     fraction interpolated within the segment from its elapsed time and expected duration (its
     ``work`` times the seconds per unit of work measured on the segments before it).
     """
 
     def __init__(self, progress, cancel):
         self.progress, self.cancel = progress, cancel
+        self.active = progress is not None or cancel is not None
         self.lo = self.hi = 0.0
         self.message, self.work = "", 0.0
         self.start = self.last = time.perf_counter()
@@ -289,18 +317,6 @@ class _Reporter:
             expected = self.seconds_done / self.work_done * self.work
             share = min((now - self.start) / expected, TILE_PROGRESS_CAP)
         self(self.lo + (self.hi - self.lo) * share, self.message)
-
-
-class _Watch(TorchFunctionMode):
-    """While active (on this thread only), every torch call first ticks the reporter."""
-
-    def __init__(self, reporter: _Reporter):
-        super().__init__()
-        self.reporter = reporter
-
-    def __torch_function__(self, func, types, args=(), kwargs=None):
-        self.reporter.tick()
-        return func(*args, **(kwargs or {}))
 
 
 def _as_lattice(lattice) -> np.ndarray:

@@ -34,6 +34,7 @@ winding once, after the world mapping, for every method.
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -117,7 +118,9 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         grid: the input; a plain (X, Y, Z) array is accepted and placed at unit voxel size.
         method: one of METHODS. MESH_ONLY_METHODS need ``labels`` (use ``remesh_mesh``).
         checkpoint: path of a .safetensors checkpoint (learned methods); default: shipped weights.
-        threads: torch CPU threads (default: torch's choice).
+        threads: CPU threads of the network (default: every core this process may use).
+        device: "cpu" runs the networks in the numpy runtime (no torch); "cuda" (or any
+            other torch device) in torch.
         min_component_faces: drop connected components smaller than this.
         tile: lattice tile size for large grids (learned methods); None = automatic.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
@@ -332,16 +335,24 @@ def _predict(method, lattice, labels, checkpoint, threads, device, tile, progres
 
             return binary_oracle_vertex(labels[0], surface_nets_lattice(lattice))
         return labels[0].vertex
-    import torch
-
     from .inference import predict_lattice
 
-    if threads:
-        torch.set_num_threads(int(threads))
-    model = load_model(checkpoint or _default_checkpoint(method))
-    vertex, _ = predict_lattice(model, lattice, device=device, tile=tile, progress=progress,
-                                cancel=cancel, canonical=reframe)
+    model = load_model(checkpoint or _default_checkpoint(method), device)
+    set_inference_threads(threads, device)
+    vertex, _ = predict_lattice(model, lattice, device=None if device == "cpu" else device,
+                                tile=tile, progress=progress, cancel=cancel, canonical=reframe)
     return vertex
+
+
+def set_inference_threads(threads: int | None, device: str = "cpu") -> int:
+    """CPU threads of the network: ``threads``, or every core this process may use when None
+    or 0 (so an "Auto" run after a ``threads=1`` run uses the cores again). Returns the count."""
+    from .runtime.parallel import set_threads
+
+    count = set_threads(threads)
+    if device != "cpu" and "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(count)
+    return count
 
 
 def _default_checkpoint(method: str) -> Path:
@@ -351,15 +362,20 @@ def _default_checkpoint(method: str) -> Path:
 
 
 @lru_cache(maxsize=4)
-def _load_model_cached(path: str, mtime: float):
+def _load_torch_model(path: str, mtime: float):
     from .checkpoint import load_checkpoint
 
     model, _ = load_checkpoint(path)
     return model.eval()
 
 
-def load_model(checkpoint):
-    """Load (and cache per process) the network of a checkpoint path."""
+def load_model(checkpoint, device: str = "cpu"):
+    """The network of a checkpoint path, cached per process: the numpy runtime's ``Network``
+    on the CPU (no torch), torch's ``AGNDCCascade`` on any other device."""
     path = Path(checkpoint)
+    if device == "cpu":
+        from .runtime import load_network
+
+        return load_network(path)
     mtime = path.stat().st_mtime if path.exists() else 0.0
-    return _load_model_cached(str(path), mtime)
+    return _load_torch_model(str(path), mtime)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-import torch
 
 from .grid import CELL_EDGES
 
@@ -26,51 +25,34 @@ from .grid import CELL_EDGES
 CENTRE = 0.5
 
 
-@torch.no_grad()
-def surface_nets_offsets(occupancy: torch.Tensor) -> torch.Tensor:
-    """Surface nets vertex of every cell as an offset from its min corner.
-
-    Args:
-        occupancy: (..., X, Y, Z) bool or 0/1 float lattice (any leading batch dims, any device).
-
-    Returns:
-        (..., X, Y, Z, 3) float32 offsets in [0, 1]; ``CENTRE`` for cells with no crossed edge
-        and for the last layer of cells along each axis (they lack their far corner).
-    """
-    g = occupancy.to(torch.float32)
-    dims = g.shape[-3:]
+def surface_nets_lattice(lattice: np.ndarray) -> np.ndarray:
+    """(X, Y, Z) bool lattice -> (X, Y, Z, 3) float32 surface nets offsets (numpy; the same
+    sums in the same order as ``nn.common.surface_nets_offsets``, the batched torch version the
+    networks' prior uses in training)."""
+    g = np.asarray(lattice).astype(np.float32)
+    dims = g.shape
     n_cells = [max(n - 1, 0) for n in dims]
-    lead = g.shape[:-3]
-    total = g.new_zeros(*lead, *n_cells, 3)
-    count = g.new_zeros(*lead, *n_cells)
-    # (..., X-1, Y, Z) etc.: 1 where the edge from p along +axis joins inside and outside
-    crossed = [(g.narrow(a - 3, 1, dims[a] - 1) != g.narrow(a - 3, 0, dims[a] - 1)).float()
-               for a in range(3)]
+    total = np.zeros((*n_cells, 3), dtype=np.float32)
+    count = np.zeros(n_cells, dtype=np.float32)
+    # (X-1, Y, Z) etc.: 1 where the edge from p along +axis joins inside and outside
+    crossed = [(np.diff(g, axis=a) != 0).astype(np.float32) for a in range(3)]
     for axis, start in CELL_EDGES:
-        # cell c's edge leaving point c + start along axis, and its midpoint in the cell
-        part = crossed[axis]
-        for a in range(3):
-            if a != axis:
-                part = part.narrow(a - 3, start[a], n_cells[a])
+        part = crossed[axis][tuple(slice(0, n_cells[a]) if a == axis
+                                   else slice(start[a], start[a] + n_cells[a])
+                                   for a in range(3))]
         count += part
         for a in range(3):
-            total[..., a] += (0.5 if a == axis else start[a]) * part
+            total[..., a] += np.float32(0.5 if a == axis else start[a]) * part
     has = count > 0
-    offsets = torch.where(has[..., None], total / count.clamp_min(1.0)[..., None],
-                          torch.full_like(total, CENTRE))
-    # (..., X, Y, Z, 3): the last layer of cells along each axis stays at the centre
-    out = g.new_full((*lead, *dims, 3), CENTRE)
-    out[..., :n_cells[0], :n_cells[1], :n_cells[2], :] = offsets
+    offsets = np.where(has[..., None], total / np.maximum(count, 1.0)[..., None],
+                       np.float32(CENTRE)).astype(np.float32)
+    out = np.full((*dims, 3), CENTRE, dtype=np.float32)
+    out[:n_cells[0], :n_cells[1], :n_cells[2]] = offsets
     return out
 
 
-def surface_nets_lattice(lattice: np.ndarray) -> np.ndarray:
-    """numpy convenience: (X, Y, Z) bool lattice -> (X, Y, Z, 3) float32 offsets."""
-    return surface_nets_offsets(torch.from_numpy(np.ascontiguousarray(lattice))).numpy()
-
-
 def surface_nets_offsets_naive(lattice: np.ndarray) -> np.ndarray:
-    """Cell-by-cell reference of ``surface_nets_offsets`` for one (X, Y, Z) lattice (slow)."""
+    """Cell-by-cell reference of ``surface_nets_lattice`` for one (X, Y, Z) lattice (slow)."""
     lattice = np.asarray(lattice, dtype=bool)
     out = np.full(lattice.shape + (3,), CENTRE, dtype=np.float64)
     for cell in itertools.product(*(range(n - 1) for n in lattice.shape)):

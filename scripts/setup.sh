@@ -7,6 +7,8 @@ command -v "$PYTHON" >/dev/null || PYTHON=python3
 if [ ! -x .venv/bin/python ]; then
     "$PYTHON" -m venv .venv
 fi
-# torch==2.13.0 is pinned in pyproject.toml (the CPU wheel); numpy < 2 to match Blender's bpy
-.venv/bin/python -m pip install --quiet --disable-pip-version-check -e '.[test,report,dask]'
+# the library needs no torch; this development environment adds it (training, the reference
+# runtime) pinned to the CPU wheel, so pip never pulls a multi-GB CUDA build; numpy < 2 (bpy)
+.venv/bin/python -m pip install --quiet --disable-pip-version-check \
+    -e '.[train,test,report,dask]' 'torch==2.13.0'
 .venv/bin/python -c "import agndc_core, torch; print('agndc_core ready, torch', torch.__version__)"

@@ -1,7 +1,18 @@
-"""The AGNDC networks (torch): config, modules, cascade and loss. Re-exports only."""
+"""The AGNDC networks (torch): config, modules, cascade and loss. Re-exports only.
 
-from .agdrnet import AGDRNet, AGNDCCascade
-from .config import AGNDCConfig, undc_baseline
-from .loss import AGNDCLoss
+The re-exports are resolved on first use, so ``agndc_core.nn.config`` and ``agndc_core.nn.layout``
+(numpy only, read by the torch-free inference runtime) import without torch.
+"""
 
-__all__ = ["AGDRNet", "AGNDCCascade", "AGNDCConfig", "AGNDCLoss", "undc_baseline"]
+from importlib import import_module
+
+_EXPORTS = {"AGDRNet": "agdrnet", "AGNDCCascade": "agdrnet", "AGNDCConfig": "config",
+            "undc_baseline": "config", "AGNDCLoss": "loss"}
+
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        return getattr(import_module(f".{_EXPORTS[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -22,14 +22,16 @@ from torch import nn
 
 from ..errors import ModelError
 from ..grid import occupancy_pyramid
-from ..surfacenets import CENTRE, surface_nets_offsets
-from .band_ops import BandOps, scale_ops, snake_margin, torus_periods
+from ..surfacenets import CENTRE
+from .band_ops import BandOps, scale_ops, torus_periods
+from .common import surface_nets_offsets
 from .config import AGNDCConfig
 from .crpm import CRPM
 from .dense_ops import DenseOps
 from .dffm import DFFM
 from .fdm import FDM, PredictionHead
 from .gdfem import GDFEM
+from .layout import lookup_margin
 from .snake import DSConv
 
 
@@ -210,7 +212,7 @@ class AGNDCCascade(nn.Module):
         cfg = self.config
         radius = cfg.band_radius if radius is None else radius
         periods = self.torus_periods
-        margin = max(snake_margin(cfg.snake_kernel, cfg.snake_scope), cfg.window) + 1
+        margin = lookup_margin(cfg.snake_kernel, cfg.snake_scope, cfg.window)
         device = next(self.parameters()).device
         ops = scale_ops(occupancy_s, radius, periods[s],
                         periods[s + 1] if s < self.levels else None, margin, device)

@@ -32,14 +32,12 @@ convolutions write into reused buffers instead.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
-from scipy import ndimage
 
 from .common import (CELL_CORNERS, cell_surface, child_prediction, cube_offsets, lateral_axes,
                      snake_corners)
+from .layout import half_band, snake_margin, surface_distance, torus_periods  # noqa: F401
 
 #: floats per gather buffer (32 MB): bounds memory, keeps the matmul operands cache-friendly
 CHUNK_FLOATS = 1 << 23
@@ -376,40 +374,6 @@ def _bilinear(frac: torch.Tensor) -> torch.Tensor:
 # ---------------------------------------------------------------------- building the pyramid
 
 
-def surface_distance(occupancy: np.ndarray) -> np.ndarray:
-    """(X, Y, Z) bool -> int32 Chebyshev distance to the nearest point of the other type.
-
-    Points with a differing neighbour among their 26 get 1; borders replicate. A uniform grid
-    gets a large value everywhere.
-    """
-    occ = occupancy.astype(np.uint8)
-    surface = ndimage.maximum_filter(occ, 3, mode="nearest") != ndimage.minimum_filter(
-        occ, 3, mode="nearest")
-    if not surface.any():
-        return np.full(occ.shape, np.iinfo(np.int32).max // 2, dtype=np.int32)
-    return ndimage.distance_transform_cdt(~surface, metric="chessboard").astype(np.int32) + 1
-
-
-def torus_periods(levels: int, window: int | None) -> list[int]:
-    """Far-field period P_s of every scale s = 0..levels.
-
-    The coarsest scale is uniform far away (period 1), but CRPM of the next finer scale keeps
-    half-resolution features there whose period is half of that scale's: P_j = window / 2 when
-    attention makes the finer scale window-periodic. Each finer scale doubles the period (the
-    sparse up-sampling depends on the child index), which stays a multiple of the window.
-    """
-    periods = [max(1, (window or 2) // 2)]
-    for _ in range(levels):
-        periods.insert(0, 2 * periods[0])
-    return periods
-
-
-def snake_margin(kernel: int, scope: float) -> int:
-    """Lattice points a snake may reach beyond its centre: K // 2 along its axis, the bounded
-    cumulative drift (+1 for the bilinear corner) across."""
-    return max(kernel // 2, math.ceil(scope * (kernel // 2)) + 1) + 1
-
-
 def scale_ops(occupancy: np.ndarray, radius: int, period: int, half_period: int | None = None,
               margin: int = 8, device="cpu") -> BandOps:
     """BandOps of one scale's lattice; with ``half_period`` also its CRPM ``half`` lattice.
@@ -424,13 +388,10 @@ def scale_ops(occupancy: np.ndarray, radius: int, period: int, half_period: int 
     ops = BandOps(torch.from_numpy(occupancy).to(device), torch.from_numpy(dist).to(device),
                   radius, period, margin)
     if half_period is not None:
-        dx, dy, dz = dist.shape
-        coarse = occupancy.reshape(dx // 2, 2, dy // 2, 2, dz // 2, 2).any(axis=(1, 3, 5))
-        # ceil(min over the 8 children / 2)
-        child_min = dist.reshape(dx // 2, 2, dy // 2, 2, dz // 2, 2).min(axis=(1, 3, 5))
+        coarse, coarse_dist, coarse_radius = half_band(occupancy, dist, radius)
         ops.half = BandOps(torch.from_numpy(coarse).to(device),
-                           torch.from_numpy((child_min + 1) // 2).to(device),
-                           (radius + 1) // 2 + 3, half_period, margin)
+                           torch.from_numpy(coarse_dist).to(device), coarse_radius, half_period,
+                           margin)
     return ops
 
 

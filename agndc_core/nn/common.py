@@ -13,30 +13,20 @@ border is empty space, so this is what an infinite empty surrounding would give.
 
 from __future__ import annotations
 
-import itertools
-
 import torch
 
 from ..grid import CELL_EDGES
+from ..surfacenets import CENTRE
+from . import layout
+from .layout import CELL_EDGE_CORNERS, lateral_axes  # noqa: F401  (re-exported)
 
-#: (8, 3) the corners {0,1}^3 of a cell, index = 4 dx + 2 dy + dz
-CELL_CORNERS = torch.tensor(list(itertools.product((0, 1), repeat=3)), dtype=torch.int64)
-#: for each edge axis, the 4 corners (indices into CELL_CORNERS) its cell edges leave from:
-#: x-edges leave from (0, dy, dz), y-edges from (dx, 0, dz), z-edges from (dx, dy, 0)
-CELL_EDGE_CORNERS = tuple(
-    tuple(sorted(4 * start[0] + 2 * start[1] + start[2] for a, start in CELL_EDGES if a == axis))
-    for axis in range(3))
+#: (8, 3) the corners {0,1}^3 of a cell, index = 4 dx + 2 dy + dz (``layout.CELL_CORNERS``)
+CELL_CORNERS = torch.from_numpy(layout.CELL_CORNERS)
 
 
 def cube_offsets(k: int) -> torch.Tensor:
     """(k^3, 3) int64 neighbour offsets of a k x k x k kernel, in ``nn.Conv3d`` weight order."""
-    r = range(-(k // 2), k // 2 + 1)
-    return torch.tensor(list(itertools.product(r, r, r)), dtype=torch.int64)
-
-
-def lateral_axes(axis: int) -> tuple[int, int]:
-    """The two axes a snake along ``axis`` may bend into, in increasing order."""
-    return tuple(a for a in range(3) if a != axis)
+    return torch.from_numpy(layout.cube_offsets(k))
 
 
 def snake_offsets(delta: torch.Tensor, scope: float) -> torch.Tensor:
@@ -79,7 +69,7 @@ def snake_corners(coords: torch.Tensor, offsets: torch.Tensor, axis: int):
     pos[:, :, axis] += torch.arange(k, device=coords.device) - k // 2
     pos[:, :, lat_b] += base[:, 0].long()
     pos[:, :, lat_c] += base[:, 1].long()
-    corner = torch.tensor([[0, 0], [1, 0], [0, 1], [1, 1]], device=coords.device)
+    corner = torch.from_numpy(layout.SNAKE_CORNERS).to(coords.device)
     # (N, K, 4, 3)
     corners = pos[:, :, None, :].expand(n, k, 4, 3).clone()
     corners[..., lat_b] += corner[:, 0]
@@ -121,3 +111,42 @@ def child_prediction(p: torch.Tensor, mask: torch.Tensor, child: torch.Tensor) -
     vertex = 2.0 * p[..., :3] + 0.5 - child.to(p.dtype)
     out = torch.cat([vertex, torch.sigmoid(p[..., 3:]).expand(vertex.shape)], dim=-1)
     return out * mask[..., None].to(p.dtype)
+
+
+@torch.no_grad()
+def surface_nets_offsets(occupancy: torch.Tensor) -> torch.Tensor:
+    """Surface nets vertex of every cell as an offset from its min corner: the networks' prior,
+    batched and on any device (``surfacenets.surface_nets_lattice`` is the same in numpy).
+
+    Args:
+        occupancy: (..., X, Y, Z) bool or 0/1 float lattice (any leading batch dims).
+
+    Returns:
+        (..., X, Y, Z, 3) float32 offsets in [0, 1]; ``CENTRE`` for cells with no crossed edge
+        and for the last layer of cells along each axis (they lack their far corner).
+    """
+    g = occupancy.to(torch.float32)
+    dims = g.shape[-3:]
+    n_cells = [max(n - 1, 0) for n in dims]
+    lead = g.shape[:-3]
+    total = g.new_zeros(*lead, *n_cells, 3)
+    count = g.new_zeros(*lead, *n_cells)
+    # (..., X-1, Y, Z) etc.: 1 where the edge from p along +axis joins inside and outside
+    crossed = [(g.narrow(a - 3, 1, dims[a] - 1) != g.narrow(a - 3, 0, dims[a] - 1)).float()
+               for a in range(3)]
+    for axis, start in CELL_EDGES:
+        # cell c's edge leaving point c + start along axis, and its midpoint in the cell
+        part = crossed[axis]
+        for a in range(3):
+            if a != axis:
+                part = part.narrow(a - 3, start[a], n_cells[a])
+        count += part
+        for a in range(3):
+            total[..., a] += (0.5 if a == axis else start[a]) * part
+    has = count > 0
+    offsets = torch.where(has[..., None], total / count.clamp_min(1.0)[..., None],
+                          torch.full_like(total, CENTRE))
+    # (..., X, Y, Z, 3): the last layer of cells along each axis stays at the centre
+    out = g.new_full((*lead, *dims, 3), CENTRE)
+    out[..., :n_cells[0], :n_cells[1], :n_cells[2], :] = offsets
+    return out

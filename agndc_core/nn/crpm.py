@@ -19,6 +19,7 @@ from torch import nn
 
 from .config import AGNDCConfig
 from .fdm import PredictionHead
+from .layout import crpm_radii
 
 
 class CRPM(nn.Module):
@@ -37,12 +38,7 @@ class CRPM(nn.Module):
     def radii(radius: int) -> dict:
         """Band radii of each stage for an output of ``radius``, so that no read leaves what
         was computed (before capping by the band): mix convs, F^1/F^2, half-res stages."""
-        r_f = radius + 2
-        r_h = (r_f + 1) // 2  # half rows holding the parents of F^1's rows
-        r_down = r_h + 3
-        r_f1 = max(r_f, 2 * r_down + 1)  # fine rows holding the children of r_down's rows
-        return {"mix": radius + 1, "f": r_f, "half": r_h, "down": r_down, "f1": r_f1,
-                "input": r_f1 + 1}
+        return crpm_radii(radius)
 
     def forward(self, w: torch.Tensor, p_iso: torch.Tensor, ops, radius) -> torch.Tensor:
         act = lambda x: F.leaky_relu(x, self.slope, inplace=True)  # noqa: E731  (fresh tensors)

@@ -1,5 +1,6 @@
-"""build_addon.py without bpy or a network: wheel sources, tags per Python, the CUDA refusal,
-merging two Pythons' wheel sets and the error for an unresolvable set (fake wheels only)."""
+"""build_addon.py without bpy or a network: what is staged (the product without torch or the
+research wing), wheel sources, tags per Python, the torch refusal, merging two Pythons' wheel
+sets and the error for an unresolvable set (fake wheels only)."""
 
 import importlib.util
 import subprocess
@@ -16,14 +17,6 @@ build_addon = sys.modules["build_addon"] = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(build_addon)
 
 LINUX = "manylinux_2_28_x86_64"
-#: PyPI's torch 2.13.0 Requires-Dist (the same lines in its Linux, Windows and macOS wheels)
-PYPI_TORCH_REQUIRES = [
-    "filelock", "typing-extensions>=4.10.0", "sympy>=1.13.3", "networkx>=2.5.1",
-    'cuda-toolkit[cublas,cudart]==13.0.3; platform_system == "Linux"',
-    'nvidia-cudnn-cu13==9.20.0.48; platform_system == "Linux"',
-    'triton==3.7.1; platform_system == "Linux" and python_version < "3.15"',
-    'pyyaml; extra == "pyyaml"',
-]
 
 
 def fake_wheel(folder, name, *, requires=(), requires_python="", files=None):
@@ -40,59 +33,61 @@ def fake_wheel(folder, name, *, requires=(), requires_python="", files=None):
     return path
 
 
-# -- CUDA refusal ---------------------------------------------------------------------------
+# -- what ships -----------------------------------------------------------------------------
 
 @pytest.mark.parametrize("names, culprit", [
-    ([f"torch-2.13.0+cu126-cp311-cp311-{LINUX}.whl"], "+cu126"),
-    ([f"torch-2.13.0+rocm6.4-cp311-cp311-{LINUX}.whl"], "+rocm6.4"),
-    ([f"torch-2.13.0+cpu-cp311-cp311-{LINUX}.whl",
+    ([f"torch-2.13.0+cpu-cp311-cp311-{LINUX}.whl"], "torch-2.13.0+cpu"),
+    ([f"scipy-1.17.1-cp311-cp311-{LINUX}.whl",
       f"nvidia_cublas_cu12-12.8.4.1-py3-none-{LINUX}.whl"], "nvidia_cublas_cu12"),
-    ([f"torch-2.13.0+cpu-cp311-cp311-{LINUX}.whl",
-      f"triton-3.7.1-cp311-cp311-{LINUX}.whl"], "triton-3.7.1"),
-    ([f"cuda_toolkit-13.0.3-py3-none-{LINUX}.whl"], "cuda_toolkit"),
+    ([f"triton-3.7.1-cp311-cp311-{LINUX}.whl"], "triton-3.7.1"),
 ])
-def test_refuses_cuda_wheel_sets(names, culprit):
-    with pytest.raises(SystemExit, match="refusing to bundle a CUDA build") as caught:
-        build_addon.check_cpu_only(names, "linux-x64", "3.11")
-    message = str(caught.value)
-    assert culprit in message and "linux-x64, Python 3.11" in message
-    assert "--torch-index" in message and "--find-links" in message
+def test_refuses_torch_and_cuda_wheels(names, culprit):
+    with pytest.raises(SystemExit, match="refusing to bundle") as caught:
+        build_addon.check_no_torch(names, "linux-x64", "3.11")
+    assert culprit in str(caught.value) and "linux-x64, Python 3.11" in str(caught.value)
+    build_addon.check_no_torch([f"scipy-1.17.1-cp311-cp311-{LINUX}.whl"], "linux-x64", "3.11")
 
 
-def test_accepts_cpu_wheel_set():
-    build_addon.check_cpu_only(
-        [f"torch-2.13.0+cpu-cp313-cp313-{LINUX}.whl", "torch-2.13.0-cp313-cp313-win_amd64.whl",
-         "scipy-1.17.1-cp313-cp313-win_amd64.whl", "sympy-1.14.0-py3-none-any.whl"],
-        "linux-x64", "3.13")
+def test_staged_core_is_the_product_without_torch(tmp_path):
+    """The extension carries the product path only: no training, evaluation, research or torch
+    modules, and nothing staged imports torch."""
+    stage = build_addon.stage_sources(tmp_path / "agndc_remesher")
+    core = stage / "agndc_core"
+    for research in ("training", "evaluate.py", "report.py", "symmetry.py", "solids.py",
+                     "shapes.py", "batch.py", "cli.py", "nn/agdrnet.py", "nn/band_ops.py"):
+        assert not (core / research).exists(), research
+    assert (core / "weights" / "agndc.safetensors").is_file()
+    for path in stage.rglob("*.py"):
+        text = path.read_text()
+        assert "import torch" not in text and "from torch" not in text, path
 
 
-def test_refuses_torch_built_for_cuda_without_local_version(tmp_path):
-    """PyPI's Linux wheel is named torch-2.13.0-cp311-… (no +cu130): torch/version.py tells."""
-    cuda = fake_wheel(tmp_path, f"torch-2.13.0-cp311-cp311-{LINUX}.whl",
-                      files={"torch/version.py": "__version__ = '2.13.0+cu130'\n"
-                                                 "cuda: Optional[str] = '13.0'\n"})
-    with pytest.raises(SystemExit, match=r"CUDA 13\.0 build"):
-        build_addon.check_cpu_only([cuda], "linux-x64", "3.11")
-    (tmp_path / "cpu").mkdir()
-    cpu = fake_wheel(tmp_path / "cpu", "torch-2.13.0-cp311-cp311-win_amd64.whl",
-                     files={"torch/version.py": "cuda: Optional[str] = None\n"})
-    build_addon.check_cpu_only([cpu], "windows-x64", "3.11")
-
-
-@pytest.mark.parametrize("platform, python, cuda", [
-    ("linux-x64", "3.11", True), ("linux-x64", "3.13", True),
-    ("windows-x64", "3.11", False), ("macos-arm64", "3.13", False)])
-def test_torch_requirements_per_target(tmp_path, platform, python, cuda):
-    """PyPI torch's CUDA requirements apply on Linux only and are refused there."""
-    wheel = fake_wheel(tmp_path, "torch-2.13.0-cp311-cp311-any.whl", requires=PYPI_TORCH_REQUIRES)
-    requirements = build_addon._requirements_for(wheel, platform, python)
-    assert "sympy>=1.13.3" in requirements and not any("pyyaml" in r for r in requirements)
-    assert any(r.startswith("nvidia-cudnn") for r in requirements) == cuda
-    if cuda:
-        with pytest.raises(SystemExit, match="torch requires triton==3.7.1"):
-            build_addon.check_cpu_only([], platform, python, requirements=requirements)
-    else:
-        build_addon.check_cpu_only([], platform, python, requirements=requirements)
+def test_staged_core_remeshes_without_torch(tmp_path):
+    """Every method the add-on offers runs from the staged folder with torch unimportable."""
+    stage = build_addon.stage_sources(tmp_path / "agndc_remesher")
+    code = f"""
+import builtins, sys
+real = builtins.__import__
+def guarded(name, *args, **kwargs):
+    if name.split(".")[0] in ("torch", "safetensors"):
+        raise ImportError(name + " is not bundled")
+    return real(name, *args, **kwargs)
+builtins.__import__ = guarded
+sys.path.insert(0, {str(stage)!r})
+import numpy as np
+from agndc_core import pipeline
+assert pipeline.__file__.startswith({str(stage)!r})
+x, y, z = np.meshgrid(*[np.arange(16)] * 3, indexing="ij")
+ball = ((x - 7) ** 2 + (y - 8) ** 2 + (z - 7) ** 2) < 25
+for method in ("agndc", "undc", "surfacenets", "mc", "mc_taubin"):
+    assert len(pipeline.remesh(ball, method=method).faces) > 100, method
+verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+assert len(pipeline.remesh_mesh(verts, faces, resolution=12, method="sharp").faces) > 10
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-2000:]
 
 
 # -- tags and sources per Python ------------------------------------------------------------
@@ -101,8 +96,7 @@ def test_torch_requirements_per_target(tmp_path, platform, python, cuda):
                                                 ("3.13", "cp313", "cp311")])
 def test_pip_command_per_python(tmp_path, python, own, other):
     command = build_addon.pip_download_command(
-        "linux-x64", python, tmp_path, ["scipy>=1.11"], [], deps=True,
-        constraints=tmp_path / "c.txt")
+        "linux-x64", python, tmp_path, ["scipy>=1.11"], [], constraints=tmp_path / "c.txt")
     pairs = list(zip(command, command[1:]))
     assert ("--python-version", python) in pairs and ("--implementation", "cp") in pairs
     assert {b for a, b in pairs if a == "--abi"} == {own, "abi3", "none"}
@@ -127,23 +121,17 @@ def test_python_compatibility_as_blender_judges(name, fits311, fits313):
     assert build_addon.fits(name, "windows-x64", "3.11") == (pure and fits311)
 
 
-def test_torch_source_per_platform():
-    online = build_addon.WheelSources(torch_index="https://example.org/cpu",
-                                      find_links=["/wheels"])
-    assert online.pip_args("linux-x64", "torch") == [
-        "--index-url", "https://example.org/cpu", "--find-links", "/wheels"]
-    offline = build_addon.WheelSources(torch_index=None, find_links=["/wheels"])
-    assert offline.pip_args("linux-x64", "torch") == ["--no-index", "--find-links", "/wheels"]
-    for sources in (online, offline):  # PyPI's Windows/macOS torch is a CPU build
-        assert sources.pip_args("windows-x64", "torch") == ["--find-links", "/wheels"]
-        assert sources.pip_args("linux-x64", "deps") == ["--find-links", "/wheels"]
+def test_find_links_is_offline():
+    assert build_addon.WheelSources().pip_args() == []
+    assert build_addon.WheelSources(find_links=["/a", "/b"]).pip_args() == [
+        "--no-index", "--find-links", "/a", "--find-links", "/b"]
 
 
-def test_parse_args_torch_index_default(tmp_path):
+def test_parse_args(tmp_path):
     args = build_addon.parse_args([])
-    assert args.torch_index == build_addon.TORCH_CPU_INDEX and args.python == ["3.11", "3.13"]
+    assert args.find_links == [] and args.python == ["3.11", "3.13"]
     args = build_addon.parse_args(["--find-links", str(tmp_path), "--python", "3.11"])
-    assert args.torch_index is None and args.python == ["3.11"]
+    assert args.find_links == [tmp_path] and args.python == ["3.11"]
     with pytest.raises(SystemExit):
         build_addon.parse_args(["--find-links", str(tmp_path / "missing")])
     with pytest.raises(SystemExit):
@@ -188,18 +176,18 @@ def test_manifest_lists_both_pythons(tmp_path):
 
 
 def test_unresolvable_python_names_python_and_way_out(tmp_path, monkeypatch):
-    """No cp313 CPU torch in the folder: one error naming the platform, Python and Blender."""
-    stderr = "ERROR: Could not find a version that satisfies the requirement torch==2.13.0\n"
+    """No cp313 scipy in the folder: one error naming the platform, Python and Blender."""
+    stderr = "ERROR: Could not find a version that satisfies the requirement scipy>=1.11\n"
 
     def fake_run(command, **kwargs):
         return subprocess.CompletedProcess(command, 1, stderr=stderr)
 
     monkeypatch.setattr(build_addon.subprocess, "run", fake_run)
-    sources = build_addon.WheelSources(torch_index=None, find_links=[tmp_path])
+    sources = build_addon.WheelSources(find_links=[tmp_path])
     with pytest.raises(SystemExit) as caught:
         build_addon.download_wheels("linux-x64", "3.13", sources, tmp_path / "cache")
     message = str(caught.value)
-    for part in ("linux-x64, Python 3.13 (Blender 5.1+)", "torch==2.13.0", "+cpu wheel",
+    for part in ("linux-x64, Python 3.13 (Blender 5.1+)", "scipy>=1.11",
                  "Could not find a version", "--python 3.11", "--find-links DIR"):
         assert part in message, part
 
@@ -223,18 +211,3 @@ def test_later_python_pins_the_wheels_it_shares(tmp_path, monkeypatch):
     assert build_addon.download_consistent("linux-x64", "3.13", sources, tmp_path,
                                            earlier) == ["resolved"]
     assert calls == [["networkx==3.6.1", "safetensors==0.8.0"], []]
-
-
-def test_missing_torch_is_not_retried_without_pins(tmp_path, monkeypatch):
-    calls = []
-
-    def fake_download(platform, python, sources, cache, *, pins=()):
-        calls.append(list(pins))
-        raise build_addon.UnresolvedError("no cp313 torch", ["torch==2.13.0"])
-
-    monkeypatch.setattr(build_addon, "download_wheels", fake_download)
-    earlier = {"3.11": [tmp_path / "networkx-3.6.1-py3-none-any.whl"]}
-    with pytest.raises(SystemExit, match="no cp313 torch"):
-        build_addon.download_consistent("linux-x64", "3.13", build_addon.WheelSources(),
-                                        tmp_path, earlier)
-    assert calls == [["networkx==3.6.1"]]

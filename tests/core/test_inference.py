@@ -11,6 +11,7 @@ from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import BAND_TOLERANCE, TILE_TOLERANCE, predict_lattice, trained_window
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.nn import AGNDCCascade, AGNDCConfig
+from agndc_core.runtime import Network
 
 
 def lattice_of(shape, centre, radius, box):
@@ -22,9 +23,15 @@ def lattice_of(shape, centre, radius, box):
 
 
 @pytest.fixture(scope="module")
-def net():
+def torch_net():
     torch.manual_seed(0)
     return randomise_outputs(AGNDCCascade(AGNDCConfig(width=8))).eval()
+
+
+@pytest.fixture(scope="module", params=["torch", "numpy"])
+def net(request, torch_net):
+    """The same network in both runtimes: every behaviour below holds for each."""
+    return torch_net if request.param == "torch" else Network.from_torch(torch_net)
 
 
 def test_outputs_shapes_ranges_non_multiple_sides(net):
@@ -35,21 +42,22 @@ def test_outputs_shapes_ranges_non_multiple_sides(net):
     assert vertex.min() >= 0 and vertex.max() <= 1 and edge.min() >= 0 and edge.max() <= 1
 
 
-def test_band_matches_dense_where_the_band_covers(net):
+def test_band_matches_dense_where_the_band_covers(net, torch_net):
     lattice = lattice_of((24, 20, 16), (10, 9, 7), 5, ((12, 20), (3, 9), (4, 12)))
-    dense = predict_lattice(net, lattice, mode="dense")
+    dense = predict_lattice(torch_net, lattice, mode="dense")
     band = predict_lattice(net, lattice, band_radius=40)
     surface = surface_cells(crossed_edges(lattice))
     for d, b in zip(dense, band):
         np.testing.assert_allclose(b[surface], d[surface], atol=BAND_TOLERANCE)
 
 
-def test_band_converges_to_dense_as_the_radius_grows(net):
+def test_band_converges_to_dense_as_the_radius_grows(torch_net):
     """For densely trained weights the band is an approximation. Random He-initialised weights
     are a harsh case (their receptive field is not local): the gap on surface cells shrinks from
     ~1/3 of the outputs' spread at radius 4 to ~1/100 at radius 8."""
     lattice = lattice_of((32, 32, 24), (14, 15, 11), 6, ((16, 24), (6, 14), (10, 18)))
     surface = surface_cells(crossed_edges(lattice))
+    net = torch_net
     with torch.inference_mode():
         dense = net(torch.from_numpy(lattice)[None])[0][0].permute(1, 2, 3, 0)[surface]
         gaps = [float((net.forward_band(lattice, r)[0][surface] - dense).abs().mean())

@@ -98,3 +98,16 @@ def test_taubin_moves_vertices_but_keeps_marching_cubes_topology():
     assert moved.max() > 1e-3 * 0.1  # smoothing happened (voxel size 0.1)
     assert moved.max() < 0.5 * 0.1  # ... without moving any vertex half a voxel
     assert "taubin smoothing" in smooth.timings
+
+
+def test_the_torch_prior_equals_the_numpy_surface_nets():
+    """The networks' prior in training (torch, batched) is the same sums as the product's."""
+    import torch
+
+    from agndc_core.nn.common import surface_nets_offsets
+
+    rng = np.random.default_rng(3)
+    batch = rng.random((3, 9, 11, 7)) < 0.4
+    torch_out = surface_nets_offsets(torch.from_numpy(batch)).numpy()
+    for lattice, theirs in zip(batch, torch_out):
+        np.testing.assert_array_equal(surface_nets_lattice(lattice), theirs)
