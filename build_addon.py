@@ -89,8 +89,8 @@ REFUSED = re.compile(r"^(torch|nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
 PRODUCT_MODULES = (
     "__init__.py", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py", "labels.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
-    "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "formats", "runtime",
-    "weights",
+    "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
+    "batch_dask.py", "formats", "runtime", "weights",
     "nn/__init__.py", "nn/config.py", "nn/layout.py",
 )
 

@@ -2,7 +2,7 @@
 a thin UI over the bpy-free ``agndc_core`` library.
 
 Installs as an extension (blender_manifest.toml, Blender 4.2+) or as a legacy add-on (bl_info;
-the core and torch must then be importable from Blender's Python)."""
+the core's dependencies must then be importable from Blender's Python)."""
 
 bl_info = {
     "name": "AGNDC Remesher",

@@ -5,8 +5,8 @@ is imported relatively; in a development checkout it is the ``pip install -e .``
 rest of the add-on does ``from ._core import pipeline, ...`` and never touches ``sys.path``.
 
 Modules are imported on first use (PEP 562), so registering the add-on imports only what the
-properties need (``plan``: numpy); scipy comes with ``gridio``/``metrics``/``pipeline`` and torch
-with the first network run.
+properties need (``plan``: numpy); scipy comes with ``gridio``/``metrics``/``pipeline``, and the
+networks run in the core's numpy runtime (no torch).
 """
 
 import importlib
@@ -15,7 +15,7 @@ from importlib.util import find_spec
 #: the package the core is imported from: vendored in the built extension, else installed
 BASE = (f"{__package__}.agndc_core" if find_spec(f"{__package__}.agndc_core") is not None
         else "agndc_core")
-MODULES = ("errors", "gridio", "metrics", "pipeline", "plan", "voxelize")
+MODULES = ("checkpoint", "errors", "gridio", "metrics", "pipeline", "plan", "voxelize")
 
 def __getattr__(name):
     if name == "core":

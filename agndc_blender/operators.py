@@ -48,7 +48,7 @@ TIMER_STEP = 0.1
 
 
 class CoreMissingError(RuntimeError):
-    """agndc_core or one of its dependencies (torch, scipy...) cannot be imported."""
+    """agndc_core or one of its dependencies (scipy, scikit-image...) cannot be imported."""
 
 
 class RunState:

@@ -6,7 +6,7 @@ thread (bpy is not thread-safe):
 
 1. ``mesh_jobs`` / ``grid_jobs`` (main thread): check each input and copy it out of Blender into
    numpy, with its grid plan and time estimate. Nothing in the scene changes.
-2. ``compute_jobs`` (any thread, numpy/torch only): voxelise, reconstruct, measure distances.
+2. ``compute_jobs`` (any thread, numpy only): voxelise, reconstruct, measure distances.
    Every input succeeds or fails on its own (``Job.error``); cancelling stops them all.
 3. ``apply_jobs`` (main thread): add the results of the inputs that succeeded, replacing the
    results of an earlier run of the same input and method, and return one ``Report`` per input.
@@ -32,6 +32,7 @@ import numpy as np
 from mathutils import Matrix
 
 from . import mesh_io
+from ._core import checkpoint as checkpoint_module
 from ._core import errors, gridio, metrics, pipeline, plan, voxelize
 
 #: collection that receives the results placed beside their sources
@@ -332,7 +333,7 @@ def grid_job(path, settings: Settings) -> Job:
 
 
 def resolve_threads(threads: int) -> int | None:
-    """0 = automatic: torch's default in background runs, else all cores but one (for the UI)."""
+    """0 = automatic: every core in background runs, else all cores but one (for the UI)."""
     if threads > 0:
         return threads
     if bpy.app.background:
@@ -599,14 +600,9 @@ def _run_one(jobs, settings, progress, cancel) -> Report:
 
 
 def checkpoint_path(method: str, checkpoint: str | None = None) -> Path | None:
-    """Weights file a learned method will load (None for marching cubes and sharp).
-
-    Mirrors ``agndc_core.checkpoint.default_checkpoint_path`` without importing torch, so the
-    sidebar can show the status cheaply.
-    """
+    """Weights file a learned method will load (None for marching cubes and sharp)."""
     if method not in pipeline.CHECKPOINT_NAMES:
         return None
     if checkpoint:
         return Path(bpy.path.abspath(checkpoint))
-    name = pipeline.CHECKPOINT_NAMES[method]
-    return Path(pipeline.__file__).resolve().parent / "weights" / f"{name}.safetensors"
+    return checkpoint_module.default_checkpoint_path(pipeline.CHECKPOINT_NAMES[method])

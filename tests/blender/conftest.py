@@ -1,10 +1,11 @@
 """pytest inside Blender: the bpy module (bpy==4.5.* from PyPI, in .venv-bpy).
 
-The session builds the extension (``build_addon.py --no-wheels``: torch and the core's
-dependencies come from the venv), installs the zip into a temporary Blender user folder with
-Blender's own installer and enables it. Every test starts from an empty scene.
+The session builds the extension (``build_addon.py --no-wheels``: the core's dependencies come
+from the venv, which has no torch, as a user's Blender has none), installs the zip into a
+temporary Blender user folder with Blender's own installer and enables it. Every test starts
+from an empty scene.
 
-bpy 4.5 can hang at interpreter exit (a registered timer, torch plus exporters), so
+bpy 4.5 can hang at interpreter exit (a registered timer plus exporters), so
 ``pytest_unconfigure`` ends the process with ``os._exit`` and pytest's exit status.
 """
 
@@ -34,9 +35,32 @@ WEIGHTS = ROOT / "agndc_core" / "weights" / "agndc.safetensors"
 _exit_status = 0
 
 
+#: a built extension zip to test instead of the developer build: with its wheels, in a venv
+#: holding only bpy, numpy and pytest (``docs/blender.md``, "Testing a release zip")
+RELEASE_ZIP = os.environ.get("AGNDC_EXTENSION_ZIP")
+
+
+def _install(zip_path) -> None:
+    result = bpy.ops.extensions.package_install_files(
+        filepath=str(zip_path), repo="user_default", enable_on_install=True)
+    assert result == {"FINISHED"}
+    assert MODULE in bpy.context.preferences.addons.keys()
+
+
+def pytest_configure(config):
+    """A release zip is installed before the tests are collected: its bundled wheels (scipy,
+    trimesh, ...) are what the tests' own imports of the core then find."""
+    if RELEASE_ZIP:
+        _install(RELEASE_ZIP)
+        sys.path.insert(0, str(ROOT))  # the core's source, for the tests' reference calls
+
+
 @pytest.fixture(scope="session")
 def built_zip(tmp_path_factory) -> Path:
-    """The developer build of the extension (no wheels), made by build_addon.py."""
+    """The extension under test: ``AGNDC_EXTENSION_ZIP``, else the developer build (no
+    wheels) made by build_addon.py."""
+    if RELEASE_ZIP:
+        return Path(RELEASE_ZIP)
     out = tmp_path_factory.mktemp("dist")
     subprocess.run([sys.executable, str(ROOT / "build_addon.py"), "--no-wheels", "--legacy",
                     "--out", str(out), "--build-dir", str(tmp_path_factory.mktemp("build"))],
@@ -48,10 +72,8 @@ def built_zip(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def addon(built_zip):
     """The installed and enabled extension: a namespace of its submodules."""
-    result = bpy.ops.extensions.package_install_files(
-        filepath=str(built_zip), repo="user_default", enable_on_install=True)
-    assert result == {"FINISHED"}
-    assert MODULE in bpy.context.preferences.addons.keys()
+    if not RELEASE_ZIP:
+        _install(built_zip)
 
     class Addon:
         module = MODULE

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import RELEASE_ZIP, ROOT
 from helpers import cad_part
 
 from agndc_core.gridio import load_mesh, save_mesh
@@ -19,7 +19,9 @@ SCRIPT = ROOT / "scripts" / "agndc_batch.py"
 
 
 def _batch(*args, tmp_path):
-    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    # a fresh user folder finds the add-on in this checkout; a release zip is found installed
+    env = dict(os.environ) if RELEASE_ZIP else dict(os.environ,
+                                                    BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     return subprocess.run([sys.executable, str(SCRIPT), "--", *map(str, args)], env=env,
                           capture_output=True, text=True, timeout=300)
 
