@@ -472,3 +472,40 @@ def drop_small_components(vertices, faces, min_faces: int):
     remap = np.full(len(vertices), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
     return vertices[used], remap[faces]
+
+
+def component_volumes(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(K,) signed volume enclosed by each connected component (``labels`` per face)."""
+    if len(faces) == 0:
+        return np.zeros(0)
+    triangles = vertices[faces]
+    volume = np.einsum("ij,ij->i", triangles[:, 0],
+                       np.cross(triangles[:, 1], triangles[:, 2])) / 6.0
+    return np.bincount(labels, volume)
+
+
+def restore_folded_components(vertices: np.ndarray, faces: np.ndarray,
+                              reference: np.ndarray) -> tuple[np.ndarray, int]:
+    """Give every component whose enclosed volume has the opposite sign to the ``reference``
+    vertices' (the same faces, e.g. surface nets) the reference's vertices.
+
+    A closed surface's signed volume tells inside from out: a learned vertex set that turns a
+    component inside out (isolated voxels of noise grids, whose vertices a network may fold
+    through each other) would leave an inverted surface; surface nets never does (the random-
+    and noise-grid property tests).
+
+    Returns:
+        (vertices, the number of components restored).
+    """
+    if len(faces) == 0:
+        return vertices, 0
+    labels = face_components(faces, len(vertices))
+    folded = np.sign(component_volumes(vertices, faces, labels)) != np.sign(
+        component_volumes(reference, faces, labels))
+    if not folded.any():
+        return vertices, 0
+    restore = np.zeros(len(vertices), dtype=bool)
+    restore[faces[folded[labels]].reshape(-1)] = True
+    out = vertices.copy()
+    out[restore] = reference[restore]
+    return out, int(folded.sum())

@@ -181,11 +181,29 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         if filtered:
             vertices = stages.run("normal filter", 0.95, filter_contoured_mesh, vertices,
                                   faces, vertex, pinned)
+        if method in CHECKPOINT_NAMES:  # a network's vertices: no component turned inside out
+            vertices = stages.run("fold check", 0.97, unfold_components, vertices, faces,
+                                  lattice, edge, min_component_faces)
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
         progress(1.0, "done")
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
+
+
+def unfold_components(vertices, faces, lattice, edge, min_component_faces: int = 0):
+    """Components the network turned inside out take their surface nets vertices
+    (``contour.restore_folded_components``). The same lattice and edges give the same vertices
+    in the same order (only the quads' diagonals follow the positions), so the surface nets
+    vertices are compared on the network's own faces."""
+    from .contour import restore_folded_components
+    from .surfacenets import surface_nets_lattice
+
+    reference, reference_faces = dual_contour(surface_nets_lattice(lattice), edge, lattice,
+                                              min_component_faces=min_component_faces)
+    if reference.shape != vertices.shape or reference_faces.shape != faces.shape:
+        return vertices  # not the same surfaces (cannot happen for one lattice): leave them
+    return restore_folded_components(vertices, faces, reference)[0]
 
 
 def filter_contoured_mesh(vertices, faces, vertex, pinned):

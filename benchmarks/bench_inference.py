@@ -1,175 +1,211 @@
-"""Benchmark of AGNDC inference (band path), flat patches, dual contouring and the normal filter
-against marching cubes.
+"""Benchmark of the learned remesh, end to end in-process, against marching cubes and surface nets.
 
-Models: ``--models`` takes widths (a random-weight cascade with the default ``AGNDCConfig`` at that
-width, e.g. 32 64) and/or ``shipped`` / ``undc`` (the packaged checkpoints with their own configs
-and trained weights). For each model and grid size, in a fresh subprocess (so peak RSS is per run): AGNDC time per
-scale and per stage (GDFEM / FDM / DFFM / CRPM, summed over scales), marching cubes of the same
-lattice (scikit-image, level 0.5), the ratio, band rows at scale 0 and the peak RSS; then the
-parameter count and safetensors file size of each model.
+For each input, in a fresh subprocess (so peak RSS is per input): ``pipeline.remesh`` of the same
+``VoxelGrid`` with marching cubes, surface nets and the shipped AGNDC (numpy runtime: network,
+flat patches, dual contouring, normal filter), the best of ``--repeat`` runs each, with the ratio
+of AGNDC to MC and to surface nets, the pipeline's stage times, the network's time per scale and
+per module (GDFEM's convolutions, LWSA, DSConv, FDM, DFFM, CRPM, band set-up), the numpy
+runtime's convolution throughput, and, where torch is installed, the same network by torch's band
+path (``--torch``) as the reference runtime. The machine's load average is printed with every
+row; ``--load N`` starts N busy processes for the duration (a shared machine: a Blender user's
+UI and other programs).
 
-Usage: python benchmarks/bench_inference.py [--models shipped 32 64] [--sizes 32 64 128] [--seed 0]
-       [--device cpu|cuda] [--threads N] [--repeat 1]
+Inputs: ``64``, ``128``, ``256`` (a generated CAD part voxelised with that many voxels on its
+longest side), ``brain`` (a folded 197x233x189 mask of the size of an MNI152 white-matter mask,
+generated: a smoothed random field inside an ellipsoid), ``mesh:PATH@RES`` (a mesh file).
+
+Usage: python benchmarks/bench_inference.py [--inputs 64 128 256 brain] [--threads 2]
+       [--repeat 2] [--load 0] [--torch]
 """
+
+from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
+import os
 import resource
 import subprocess
 import sys
-import tempfile
 import time
-from pathlib import Path
+from collections import defaultdict
 
 import numpy as np
-import torch
 
-from agndc_core.checkpoint import (count_parameters, default_checkpoint_path, load_checkpoint,
-                                   save_checkpoint)
-from agndc_core.contour import dual_contour
-from agndc_core.flatpatches import flatten_patches
-from agndc_core.labels import crossed_edges
-from agndc_core.grid import pad_to_lattice
-from agndc_core.inference import predict_lattice
-from agndc_core.mc import marching_cubes_lattice
-from agndc_core.nn import AGNDCCascade, AGNDCConfig
-from agndc_core.nn.band_ops import surface_distance
-from agndc_core.pipeline import filter_contoured_mesh
-from agndc_core.shapes import generate_shape
-from agndc_core.voxelize import voxelize
-
-STAGES = ("gdfem", "fdm", "dffm", "crpm")
+STAGES = ("voxelise", "predict", "flat patches", "source bounds", "dual contouring",
+          "normal filter")
+#: the network's modules timed inside ``predict`` (``runtime.network.Network`` methods)
+MODULES = ("gdfem", "lwsa", "dsconv", "fdm", "dffm", "crpm")
 
 
-def cad_lattice(size: int, seed: int) -> np.ndarray:
-    """A procedural CAD part voxelised at ``size`` on its longest side, padded to the lattice."""
-    vertices, faces = generate_shape(seed)
-    return pad_to_lattice(voxelize(vertices, faces, size).occupancy)
+def make_grid(spec: str):
+    """The VoxelGrid of one input spec (see the module docstring)."""
+    from agndc_core.grid import VoxelGrid
+    from agndc_core.voxelize import voxelize
+
+    if spec == "brain":
+        from scipy import ndimage
+
+        rng = np.random.default_rng(0)
+        shape = (197, 233, 189)
+        field = ndimage.gaussian_filter(rng.standard_normal(shape).astype(np.float32), 3.0)
+        axes = [np.linspace(-1, 1, n, dtype=np.float32) for n in shape]
+        x, y, z = np.meshgrid(*axes, indexing="ij")
+        r = np.sqrt((x / 0.85) ** 2 + (y / 0.9) ** 2 + (z / 0.8) ** 2)
+        occupancy = (r < 0.95) & (field > -0.02 + 0.5 * np.clip(r - 0.6, 0, None))
+        return VoxelGrid(ndimage.binary_opening(occupancy, iterations=1))
+    if spec.startswith("mesh:"):
+        from agndc_core.gridio import load_mesh
+
+        path, res = spec[5:].rsplit("@", 1)
+        vertices, faces = load_mesh(path)
+        return voxelize(vertices, faces, int(res))
+    from agndc_core.shapes import generate_shape
+
+    vertices, faces = generate_shape(0)
+    return voxelize(vertices, faces, int(spec))
 
 
-SHIPPED = {"shipped": "agndc", "undc": "undc"}
+def timed_modules(network) -> dict:
+    """Accumulate the seconds of the network's modules and band ops (outermost call only)."""
+    from agndc_core.runtime import band
+
+    times: dict = defaultdict(float)
+    depth = {"n": 0}
+
+    def wrap(owner, name, label):
+        original = getattr(owner, name)
+
+        def timed(*args, **kwargs):
+            start = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                times[label] += time.perf_counter() - start
+
+        setattr(owner, name, timed)
+
+    for name in MODULES:
+        wrap(type(network), name, name)
+    wrap(band.Band, "conv", "band conv")
+    wrap(band.Band, "snake", "band snake")
+    wrap(band.Band, "windows", "window attention")
+    wrap(band, "scale_band", "band set-up")
+    del depth
+    return times
 
 
-def build_model(spec: str):
-    """The shipped checkpoint named by ``spec``, or a random-weight default cascade of that width."""
-    if spec in SHIPPED:
-        model, _ = load_checkpoint(default_checkpoint_path(SHIPPED[spec]))
-        return model
-    torch.manual_seed(0)
-    return AGNDCCascade(AGNDCConfig(width=int(spec)))
+def run_one(spec: str, threads: int, repeat: int, with_torch: bool) -> dict:
+    from agndc_core.checkpoint import default_checkpoint_path
+    from agndc_core.pipeline import load_model, remesh
+
+    grid = make_grid(spec)
+    row = {"input": spec, "shape": list(grid.occupancy.shape),
+           "occupied": int(grid.occupancy.sum()), "load_before": os.getloadavg()[0]}
+    network = load_model(default_checkpoint_path("agndc"))
+    module_times = timed_modules(network)
+    for method in ("mc", "surfacenets", "agndc"):
+        best = None
+        for _ in range(repeat):
+            module_times.clear()
+            start = time.perf_counter()
+            result = remesh(grid, method=method, threads=threads)
+            seconds = time.perf_counter() - start
+            if best is None or seconds < best[0]:
+                best = (seconds, dict(result.timings), dict(module_times), len(result.faces))
+        row[method] = {"seconds": best[0], "stages": best[1], "modules": best[2],
+                       "faces": best[3]}
+    if with_torch:
+        row["torch"] = torch_network_seconds(grid, threads, repeat)
+    row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    row["load_after"] = os.getloadavg()[0]
+    return row
 
 
-def timed_model(spec: str, device: str):
-    """A cascade whose scale and stage times accumulate in a dict."""
-    model = build_model(spec).to(device).eval()
-    times = {}
+def torch_network_seconds(grid, threads: int, repeat: int) -> float | None:
+    """The same network by torch's band path (the reference runtime), best of ``repeat``."""
+    try:
+        import torch
+    except ImportError:
+        return None
+    from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint
+    from agndc_core.grid import pad_to_lattice
+    from agndc_core.inference import predict_lattice
 
-    def hook(key):
-        def pre(module, args):
-            if device == "cuda":
-                torch.cuda.synchronize()
-            times[key + "@"] = time.perf_counter()
-
-        def post(module, args, out):
-            if device == "cuda":
-                torch.cuda.synchronize()
-            times[key] = times.get(key, 0.0) + time.perf_counter() - times.pop(key + "@")
-        return pre, post
-
-    for s, net in enumerate(model.nets):
-        for key, module in [(f"scale{s}", net)] + [(name, getattr(net, name)) for name in STAGES]:
-            if module is not None:
-                pre, post = hook(key)
-                module.register_forward_pre_hook(pre)
-                module.register_forward_hook(post)
-    return model, times
-
-
-def run_one(spec: str, size: int, seed: int, device: str, repeat: int) -> dict:
-    lattice = cad_lattice(size, seed)
-    model, times = timed_model(spec, device)
-    best = None
+    torch.set_num_threads(threads)
+    model, _ = load_checkpoint(default_checkpoint_path("agndc"))
+    lattice = pad_to_lattice(grid.occupancy)
+    best = float("inf")
     for _ in range(repeat):
-        times.clear()
         start = time.perf_counter()
-        vertex, _ = predict_lattice(model, lattice)
-        network = time.perf_counter() - start
-        # flat patches and the normal filter are part of every learned remesh (pipeline)
-        pinned = np.zeros(vertex.shape, dtype=bool)
-        vertex = flatten_patches(lattice, vertex, pinned=pinned)
-        flattened = time.perf_counter() - start
-        vertices, faces = dual_contour(vertex, crossed_edges(lattice), lattice)
-        contoured = time.perf_counter() - start
-        filter_contoured_mesh(vertices, faces, vertex, pinned)
-        total = time.perf_counter() - start
-        times["flat patches"] = flattened - network
-        times["contour"] = contoured - flattened
-        times["normal filter"] = total - contoured
-        if best is None or total < best[0]:
-            best = (total, dict(times))
-    start = time.perf_counter()
-    marching_cubes_lattice(lattice)
-    mc = time.perf_counter() - start
-    band_rows = int((surface_distance(lattice) <= model.config.band_radius).sum())
-    return {"model": spec, "size": size, "shape": list(lattice.shape), "total": best[0],
-            "times": best[1], "mc": mc, "band_rows": band_rows, "points": int(lattice.size),
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+        predict_lattice(model, lattice)
+        best = min(best, time.perf_counter() - start)
+    return best
 
 
-def model_size(spec: str) -> tuple[int, int]:
-    model = build_model(spec)
-    with tempfile.TemporaryDirectory() as tmp:
-        path = save_checkpoint(model, Path(tmp) / "m", training={}, metrics={})
-        return count_parameters(model), path.stat().st_size
+def _busy(stop) -> None:
+    x = 0
+    while not stop.is_set():
+        for _ in range(100000):
+            x += 1
 
 
-def main():
+def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--models", nargs="+", default=["shipped", "32", "64"],
-                        help="widths of random default cascades and/or 'shipped', 'undc'")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[32, 64, 128])
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument("--threads", type=int, default=0, help="torch threads (0: default)")
-    parser.add_argument("--repeat", type=int, default=1)
-    parser.add_argument("--single", nargs=2, help=argparse.SUPPRESS)
+    parser.add_argument("--inputs", nargs="+", default=["64", "128", "256", "brain"])
+    parser.add_argument("--threads", type=int, default=0, help="network threads (0: all cores)")
+    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--load", type=int, default=0,
+                        help="busy processes competing for the cores during the runs")
+    parser.add_argument("--torch", action="store_true",
+                        help="also time torch's band path on the same lattice (reference)")
+    parser.add_argument("--json", help="also write the rows to this file")
+    parser.add_argument("--single", help=argparse.SUPPRESS)
     args = parser.parse_args()
-    if args.device == "cuda" and not torch.cuda.is_available():
-        sys.exit("--device cuda: no CUDA device available")
-    if args.threads:
-        torch.set_num_threads(args.threads)
     if args.single:
-        print(json.dumps(run_one(args.single[0], int(args.single[1]), args.seed, args.device, args.repeat)))
+        print(json.dumps(run_one(args.single, args.threads, args.repeat, args.torch)))
         return
 
-    print(f"AGNDC band inference + dual contouring, CAD part seed {args.seed}, device "
-          f"{args.device}, torch threads {args.threads or torch.get_num_threads()}")
-    head = (f"{'model':>7} {'grid':>5} {'lattice':>13} {'band':>8} {'AGNDC s':>8} "
-            f"{'scales 2/1/0 s':>17} {'GDFEM':>6} {'FDM':>6} {'DFFM':>6} {'CRPM':>6} "
-            f"{'flat s':>6} {'DC s':>6} {'filter s':>8} {'MC s':>6} {'ratio':>6} {'peak MB':>8}")
-    print(head)
-    for spec in args.models:
-        for size in args.sizes:
-            cmd = [sys.executable, __file__, "--single", spec, str(size), "--seed",
-                   str(args.seed), "--device", args.device, "--threads", str(args.threads),
-                   "--repeat", str(args.repeat)]
-            done = subprocess.run(cmd, capture_output=True, text=True)
+    stop = multiprocessing.Event()
+    burners = [multiprocessing.Process(target=_busy, args=(stop,), daemon=True)
+               for _ in range(args.load)]
+    for burner in burners:
+        burner.start()
+    print(f"AGNDC remesh end to end (numpy runtime), {os.cpu_count()} cores, network threads "
+          f"{args.threads or 'all'}, competing busy processes {args.load}, best of {args.repeat}")
+    rows = []
+    try:
+        for spec in args.inputs:
+            command = [sys.executable, __file__, "--single", spec, "--threads",
+                       str(args.threads), "--repeat", str(args.repeat)]
+            command += ["--torch"] if args.torch else []
+            done = subprocess.run(command, capture_output=True, text=True)
             if done.returncode:
-                print(f"{spec:>7} {size:>5} failed: {done.stderr.strip()[-300:]}")
+                print(f"{spec}: failed: {done.stderr.strip()[-500:]}")
                 continue
-            r = json.loads(done.stdout.strip().splitlines()[-1])
-            t = r["times"]
-            scales = "/".join(f"{t.get(f'scale{s}', 0):.2f}" for s in (2, 1, 0))
-            stages = " ".join(f"{t.get(k, 0.0):6.2f}" for k in STAGES)
-            print(f"{spec:>7} {size:>5} {'x'.join(map(str, r['shape'])):>13} "
-                  f"{r['band_rows']:>8} {r['total']:8.2f} {scales:>17} {stages} "
-                  f"{t['flat patches']:6.3f} {t['contour']:6.3f} {t['normal filter']:8.3f} "
-                  f"{r['mc']:6.3f} {r['total'] / r['mc']:6.0f} {r['peak_rss_mb']:8.0f}",
-                  flush=True)
-    print()
-    for spec in args.models:
-        params, size = model_size(spec)
-        print(f"{spec}: {params:,} parameters, safetensors {size / 2 ** 20:.1f} MiB")
+            rows.append(json.loads(done.stdout.strip().splitlines()[-1]))
+            print_row(rows[-1])
+    finally:
+        stop.set()
+        for burner in burners:
+            burner.join()
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump(rows, handle, indent=1)
+
+
+def print_row(r: dict) -> None:
+    a, mc, sn = r["agndc"], r["mc"]["seconds"], r["surfacenets"]["seconds"]
+    shape = "x".join(map(str, r["shape"]))
+    torch_s = r.get("torch")
+    print(f"\n{r['input']} ({shape}, {r['occupied']:,} voxels; load {r['load_before']:.2f} -> "
+          f"{r['load_after']:.2f}; peak RSS {r['peak_rss_mb']:.0f} MB)")
+    print(f"  AGNDC {a['seconds']:.2f} s = {a['seconds'] / mc:.0f}x MC ({mc:.3f} s), "
+          f"{a['seconds'] / sn:.1f}x surface nets ({sn:.3f} s); {a['faces']:,} faces"
+          + (f"; network by torch {torch_s:.2f} s" if torch_s else ""))
+    print("  stages: " + ", ".join(f"{k} {v:.2f}" for k, v in a["stages"].items()))
+    print("  network: " + ", ".join(f"{k} {v:.2f}" for k, v in sorted(
+        a["modules"].items(), key=lambda kv: -kv[1])))
 
 
 if __name__ == "__main__":

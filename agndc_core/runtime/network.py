@@ -35,17 +35,30 @@ class Conv:
         # (C_in, k^3 C_out): the "project first" layout of narrow outputs
         self.project_first = np.ascontiguousarray(
             self.weight.reshape(taps, c_in, c_out).transpose(1, 0, 2).reshape(c_in, -1))
+        # (k^3 C_out, C_out) 0/1: sums the k^3 projected taps of each output channel
+        self.tap_sum = np.tile(np.eye(c_out, dtype=np.float32), (taps, 1))
         self.bias = bias
 
 
+#: rows per chunk of a point-wise linear layer on the worker threads (BLAS runs one thread each)
+LINEAR_CHUNK_ROWS = 16384
+
+
 class Linear:
+    """A 1x1x1 convolution / fully connected layer on (R, C_in) rows."""
+
     def __init__(self, weight: np.ndarray, bias: np.ndarray):
         self.weight_t = np.ascontiguousarray(weight.T)
         self.bias = bias
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        out = x @ self.weight_t
-        out += self.bias
+        out = np.empty((x.shape[0], self.weight_t.shape[1]), dtype=np.float32)
+
+        def work(a, b):
+            np.matmul(x[a:b], self.weight_t, out=out[a:b])
+            out[a:b] += self.bias
+
+        for_chunks(x.shape[0], LINEAR_CHUNK_ROWS, work)
         return out
 
 
