@@ -123,21 +123,26 @@ class Band:
         yield self.torus_coords, self.torus_type
         yield self.coords[:self.rows(radius) - self.torus], None
 
-    def neighbours(self, k: int, radius: int, radius_in: int) -> np.ndarray:
-        """(rows(radius), k^3) int32 rows of each target's k^3 neighbourhood.
-
-        One table per (k, radius_in), built for the widest radius and sliced: the rows of a
-        smaller radius are a prefix (built lazily, cached)."""
-        key = (k, radius_in)
-        if key not in self._neighbours:
-            offsets = cube_offsets(k)
-            torus = self.lookup(self.torus_coords[:, None] + offsets, radius_in,
-                                self.torus_type[:, None])
+    def neighbours(self, k: int, radius_in: int, a: int, b: int) -> np.ndarray:
+        """(b - a, k^3) intp rows of the k^3 neighbourhood of output rows [a, b), read from a
+        source of ``radius_in``. Built per chunk, not stored: reading a stored table moves as
+        many bytes as the lookup in the row volume it replaces, and a table per input radius
+        would hold ~100 MB per million band rows."""
+        t = self.torus
+        parts = []
+        if a < t:
+            key = (k, radius_in)
+            if key not in self._neighbours:  # the torus's own table: 2 P^3 rows, kept
+                self._neighbours[key] = self.lookup(
+                    self.torus_coords[:, None] + cube_offsets(k), radius_in,
+                    self.torus_type[:, None]).astype(np.intp)
+            parts.append(self._neighbours[key][a:min(b, t)])
+        if b > t:
             # band rows: offsets are affine in the padded volume (k // 2 < margin)
-            step = offsets @ np.array(self.strides)
-            band = self.volume(radius_in)[self.band_index()[:, None] + step]
-            self._neighbours[key] = np.concatenate([torus.astype(np.int32), band])
-        return self._neighbours[key][:self.rows(radius)]
+            step = cube_offsets(k) @ np.array(self.strides)
+            centre = self.band_index()[max(a, t) - t:b - t]
+            parts.append(self.volume(radius_in)[centre[:, None] + step].astype(np.intp))
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     # ------------------------------------------------------------------ bookkeeping
     def input(self) -> np.ndarray:
@@ -166,9 +171,9 @@ class Band:
     def conv(self, x: np.ndarray, conv, radius: int, tick=None) -> np.ndarray:
         """k x k x k convolution (a ``runtime.network.Conv``) of rows ``x`` at the rows of
         ``radius``."""
-        nbr = self.neighbours(conv.k, radius, self.radius_of(x))
-        taps, c_out = conv.k ** 3, conv.c_out
-        out = np.empty((nbr.shape[0], c_out), dtype=np.float32)
+        r_in = self.radius_of(x)
+        taps, c_out, n_out = conv.k ** 3, conv.c_out, self.rows(radius)
+        out = np.empty((n_out, c_out), dtype=np.float32)
         if c_out <= PROJECT_FIRST_MAX and c_out < x.shape[1]:
             # (R_in k^3, C_out): every row times every tap's weights, then narrow gathers,
             # summed over the taps by a matmul with a 0/1 matrix (faster than a strided sum)
@@ -176,18 +181,18 @@ class Band:
             tap = np.arange(taps, dtype=np.intp)
 
             def work(a, b):
-                idx = (nbr[a:b].astype(np.intp) * taps + tap).reshape(-1)
+                idx = (self.neighbours(conv.k, r_in, a, b) * taps + tap).reshape(-1)
                 cols = np.take(proj, idx, axis=0, out=scratch("proj", (idx.size, c_out)))
                 np.matmul(cols.reshape(b - a, -1), conv.tap_sum, out=out[a:b])
         else:
             width = taps * x.shape[1]
 
             def work(a, b):
-                idx = nbr[a:b].reshape(-1).astype(np.intp)
+                idx = self.neighbours(conv.k, r_in, a, b).reshape(-1)
                 cols = np.take(x, idx, axis=0, out=scratch("conv", (idx.size, x.shape[1])))
                 np.matmul(cols.reshape(-1, width), conv.weight, out=out[a:b])
 
-        for_chunks(nbr.shape[0], CHUNK_ROWS, work, tick)
+        for_chunks(n_out, CHUNK_ROWS, work, tick)
         out += conv.bias
         return out
 
