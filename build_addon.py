@@ -87,7 +87,8 @@ REFUSED = re.compile(r"^(torch|nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
 #: the product part of agndc_core (vendored into the extension); everything else in it is the
 #: training and research wing. nn/ contributes only its torch-free config and layout.
 PRODUCT_MODULES = (
-    "__init__.py", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py", "labels.py",
+    "__init__.py", "py.typed", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py",
+    "labels.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
     "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
     "batch_dask.py", "formats", "runtime", "weights",
@@ -390,7 +391,7 @@ def merge_wheel_sets(per_python: dict[str, list[Path]], platform: str) -> list[P
         for wheel in union.values():
             if fits(wheel.name, platform, python):
                 by_project.setdefault(_project(wheel), []).append(wheel)
-        for project, candidates in by_project.items():
+        for candidates in by_project.values():
             best = max(candidates, key=lambda w: Version(_version(w)))
             requires = requires_python(best)
             if requires and not SpecifierSet(requires).contains(f"{python}.0"):

@@ -2,6 +2,7 @@
 running one, help), plus draw hooks for Object Data > Remesh, the Object menu (so F3 finds the
 operator) and File > Import. Drawing only; the work is in operators.py and remesh.py."""
 
+import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -89,7 +90,7 @@ def preview(obj, settings, context):
     """(grid shape, estimated seconds, problem text or "") of remeshing ``obj`` now; cached
     per object, mesh size, transform and settings, so redraws stay cheap."""
     from ._core import errors, plan
-    from .remesh import frame_of
+    from .remesh import frame_of, resolve_threads
 
     evaluated = obj.evaluated_get(context.evaluated_depsgraph_get()) \
         if settings.use_modifiers else obj
@@ -116,8 +117,9 @@ def preview(obj, settings, context):
         methods = [settings.method]
         if settings.compare_mc and settings.method != "mc" and settings.output != "REPLACE":
             methods.append("mc")
-        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1)
-                      for m in methods)
+        threads = resolve_threads(settings.threads) or os.cpu_count() or 1
+        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1,
+                                            threads=threads) for m in methods)
         result = (grid.shape, seconds, "")
     except errors.AGNDCError as exc:
         result = ((), 0.0, str(exc).removeprefix(f"{obj.name}: "))

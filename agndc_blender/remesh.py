@@ -245,8 +245,9 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
         job.warnings.append(f"{name} is not closed ({job.open_edges:,} open edges): remeshed as "
                             f"the solid it encloses; {OPEN_MESH_HINT}")
     crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
+    threads = resolve_threads(settings.threads) or os.cpu_count() or 1
     job.estimate = sum(plan.estimate_seconds(method, grid.shape, crossings,
-                                             distances=int(settings.distance))
+                                             distances=int(settings.distance), threads=threads)
                        for method in settings.methods())
     return job
 

@@ -30,7 +30,10 @@ def main(argv=None) -> int:
 
 
 def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     parser = argparse.ArgumentParser(prog="agndc", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers()
 
     p = sub.add_parser("remesh", help="reconstruct a mesh from a grid file or a mesh")
@@ -213,9 +216,18 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (check_shifts, evaluate_meshes, headroom_lines, markdown_table,
-                           method_parts, parse_methods, require_meshes, shift_table,
-                           summarize_rows, write_report)
+    from .evaluate import (
+        check_shifts,
+        evaluate_meshes,
+        headroom_lines,
+        markdown_table,
+        method_parts,
+        parse_methods,
+        require_meshes,
+        shift_table,
+        summarize_rows,
+        write_report,
+    )
     from .pipeline import CHECKPOINT_NAMES
 
     methods = parse_methods(args.methods)

@@ -74,7 +74,8 @@ class VoxelGrid:
         self.occupancy = as_occupancy(self.occupancy, name=self.source)
         affine = np.asarray(self.affine, dtype=np.float64)
         if affine.shape != (4, 4) or not np.all(np.isfinite(affine)):
-            raise GridError(f"{self.source}: affine must be a finite 4x4 matrix, got {affine.shape}")
+            raise GridError(f"{self.source}: affine must be a finite 4x4 matrix, "
+                            f"got {affine.shape}")
         if abs(np.linalg.det(affine[:3, :3])) < 1e-30:
             raise GridError(f"{self.source}: affine is singular (zero voxel size?)")
         self.affine = affine
@@ -89,7 +90,8 @@ class VoxelGrid:
     @classmethod
     def from_spacing(cls, occupancy, voxel_size=1.0, origin=(0.0, 0.0, 0.0), source="array",
                      source_bounds=None):
-        """Build an axis-aligned grid: ``voxel_size`` scalar or (3,), ``origin`` = centre of voxel 0."""
+        """Build an axis-aligned grid: ``voxel_size`` scalar or (3,), ``origin`` = centre of
+        voxel 0."""
         size = np.broadcast_to(np.asarray(voxel_size, dtype=np.float64), (3,))
         if np.any(~np.isfinite(size)) or np.any(size <= 0):
             raise GridError(f"{source}: voxel size must be positive and finite, got {size}")
@@ -123,9 +125,11 @@ class VoxelGrid:
         return points @ inverse[:3, :3].T + inverse[:3, 3]
 
     def check_not_trivial(self) -> None:
-        """Raise GridError for a grid with no surface (all empty). A full grid is fine: padding closes it."""
+        """Raise GridError for a grid with no surface (all empty). A full grid is fine: padding
+        closes it."""
         if not self.occupancy.any():
-            raise GridError(f"{self.source}: the grid is empty (no occupied voxel), nothing to mesh")
+            raise GridError(f"{self.source}: the grid is empty (no occupied voxel), nothing to "
+                            "mesh")
 
 
 def as_occupancy(array, name: str = "array") -> np.ndarray:

@@ -305,7 +305,7 @@ def _npy_data(stream, size: int, header: tuple, label: str) -> np.ndarray:
     if len(data) < n_bytes:
         raise GridFileError(f"{label}: truncated .npy data: the header's {shape} {dtype} array "
                             f"needs {n_bytes:,} bytes, {max(available, 0):,} are left")
-    if dtype == bool:  # bytes other than 0/1 would make invalid numpy bools
+    if dtype is bool:  # bytes other than 0/1 would make invalid numpy bools
         flat = np.frombuffer(data, dtype=np.uint8, count=count) != 0
     else:
         flat = np.frombuffer(data, dtype=dtype, count=count).copy()  # writable, like np.load

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grid import CELL_EDGES, CASCADE_LEVELS, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
+from .grid import CASCADE_LEVELS, CELL_EDGES, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
 from .tolerances import tol
 from .voxelize import _choose_rule, check_mesh, inside_points
 

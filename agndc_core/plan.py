@@ -28,22 +28,26 @@ from .voxelize import grid_layout
 RESOLUTION_MIN, RESOLUTION_MAX = 3, 1024
 MARGIN = 1
 
-#: Seconds of a run, per method: (s per million crossed lattice edges, s per million lattice
-#: points, fixed s), a non-negative least-squares fit to whole ``pipeline.remesh_mesh`` runs
-#: (voxelise, labels or network, contouring) of generated shapes 11 (CAD), 7 (organic) and 40
-#: (smooth) at 48³, 96³ and 144³ with 1 torch thread, on a 2-core Linux VM while a training job
-#: used most of the other core: ``python benchmarks/bench_estimate.py`` (it prints this table).
-#: The fits are within -25..+35 % (agndc), -15..+52 % (undc), -19..+52 % (mc) and -57..+103 %
-#: (sharp, whose runs are short and were the noisiest) of the measured runs: the estimate says
-#: "about", not "exactly". More threads (an idle machine) make runs faster.
-#: "distance" is the Chamfer distance of one output to its source (30k samples), per output.
+#: Seconds of a run on one thread, per method: (s per million crossed lattice edges, s per
+#: million lattice points, fixed s), a non-negative least-squares fit to whole
+#: ``pipeline.remesh_mesh`` runs (voxelise, labels or network, contouring, filters) of generated
+#: shapes 11 (CAD), 7 (organic) and 40 (smooth) at 48³, 96³ and 144³, networks in the numpy
+#: runtime, on a quiet 2-core x86_64 machine: ``python benchmarks/bench_estimate.py --threads 1``
+#: (it prints this table). The fits are within -15..+11 % (agndc), -13..+7 % (undc), -24..+28 %
+#: (mc) and -47..+52 % (sharp, whose runs are short) of the measured runs: the estimate says
+#: "about", not "exactly". "distance" is the Chamfer distance of one output to its source (30k
+#: samples), per output.
 CALIBRATION = {
-    "agndc": (352.0, 0.307, 0.0),
-    "undc": (17.5, 1.49, 0.42),
-    "mc": (0.111, 0.128, 0.0163),
-    "sharp": (18.7, 0.0, 0.421),
-    "distance": (0.851, 0.0, 0.267),
+    "agndc": (29.5, 3.05, 0.162),
+    "undc": (14.3, 0.807, 0.00785),
+    "mc": (1.17, 0.0, 0.00207),
+    "sharp": (7.23, 0.023, 0.067),
+    "distance": (0.304, 0.0, 0.0841),
 }
+#: share of a learned run that does not get faster with more network threads (Amdahl): the same
+#: runs on 2 threads took 1/1.18..1/1.39 of their 1-thread time (agndc, mean 1.29: 0.55 serial)
+#: and 1/0.96..1/1.23 (undc, mean 1.16: 0.72 serial)
+SERIAL_SHARE = {"agndc": 0.55, "undc": 0.72}
 #: the Blender operator asks before a run estimated longer than this (seconds)
 CONFIRM_SECONDS = 10.0
 
@@ -145,15 +149,19 @@ def grid_crossings(occupancy: np.ndarray) -> int:
     return int(sum(np.count_nonzero(np.diff(padded, axis=axis)) for axis in range(3)))
 
 
-def estimate_seconds(method: str, shape, crossings: float, *, distances: int = 0) -> float:
+def estimate_seconds(method: str, shape, crossings: float, *, distances: int = 0,
+                     threads: int = 1) -> float:
     """Estimated seconds of one remesh (``CALIBRATION``), plus ``distances`` Chamfer distances.
 
     Args:
         method: a key of ``CALIBRATION``; shape: (3,) voxels of the grid; crossings: crossed
-            lattice edges (``mesh_crossings`` or ``grid_crossings``).
+            lattice edges (``mesh_crossings`` or ``grid_crossings``); threads: the network's
+            threads (``SERIAL_SHARE`` of a learned run does not speed up).
     """
     points = math.prod(int(n) + 2 for n in shape)  # the padded lattice
     total = _seconds(CALIBRATION[method], crossings, points)
+    serial = SERIAL_SHARE.get(method, 1.0)
+    total *= serial + (1.0 - serial) / max(1, int(threads))
     return total + distances * _seconds(CALIBRATION["distance"], crossings, 0)
 
 

@@ -20,9 +20,19 @@ from pathlib import Path
 
 import numpy as np
 
-from .evaluate import (METRIC_COLUMNS, check_shifts, evaluate_meshes, headroom_lines,
-                       markdown_table, method_parts, parse_methods, require_meshes, shift_table,
-                       summarize_rows, write_report)
+from .evaluate import (
+    METRIC_COLUMNS,
+    check_shifts,
+    evaluate_meshes,
+    headroom_lines,
+    markdown_table,
+    method_parts,
+    parse_methods,
+    require_meshes,
+    shift_table,
+    summarize_rows,
+    write_report,
+)
 from .pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 
 REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle_binary", "oracle",
@@ -84,13 +94,14 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               ablation_rows, *, rotated_box_shown=False, shifted=()) -> str:
     lines = ["# AGNDC results on the dev meshes", ""]
     lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
-              f"{platform.machine()} with {os.cpu_count()} CPU cores, torch "
-              f"{_torch_version()} (CPU), Python {platform.python_version()}. Every mesh is "
+              f"{platform.machine()} with {os.cpu_count()} CPU cores, numpy "
+              f"{np.__version__}, Python {platform.python_version()}. Every mesh is "
               "voxelised at the stated resolution (voxels on the longest side); every method "
               "reconstructs that same binary grid, and the metrics (UNDC definitions, "
-              f"{n_samples:,} samples per surface, the ground truth's normalised frame) compare the result "
-              "with the original mesh. Means over shapes; ECD/EF1 skip shapes without sharp "
-              "edges. `oracle` contours ground-truth labels: the ceiling of this contouring. "
+              f"{n_samples:,} samples per surface, the ground truth's normalised frame) compare "
+              "the result with the original mesh. Means over shapes; ECD/EF1 skip shapes "
+              "without sharp edges. `oracle` contours ground-truth labels: the ceiling of this "
+              "contouring. "
               "`oracle_binary` is the oracle with what a binary grid cannot tell put back (on "
               "exactly axis-aligned faces the vertex sits mid-layer along the normal): an "
               "approximate ceiling for any method that sees only the grid. "
@@ -107,7 +118,8 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
               "ceilings and the quality targets are about the plain rows. "
               "Times are wall seconds of `remesh_mesh` per shape (voxelise + network + contouring "
               "+ filter; "
-              f"the oracle's label generation is not counted), {_torch_threads()} torch threads.", ""]
+              "the oracle's label generation is not counted); the networks run in the numpy "
+              f"runtime on {_inference_threads()} threads.", ""]
     lines += ["## Models", "", _models_table(methods), ""]
     for resolution in resolutions:
         mine = [r for r in rows if r["resolution"] == resolution]
@@ -281,9 +293,10 @@ def _models_table(methods) -> str:
         scales = "/".join(str(s) for s in range(len(training.get("steps_per_scale", []))))
         data = training.get("data", {})
         lines.append(f"| {method} | `{path.name}` | {described} | {meta['parameters']:,} | "
-                     f"{path.stat().st_size / 2 ** 20:.2f} MiB | {steps} steps at scales {scales}, "
-                     f"{data.get('samples', '?')} shapes, {training.get('train_seconds', 0) / 60:.0f}"
-                     f" min on {_trained_on(training)}{_lineage_total(training)} |")
+                     f"{path.stat().st_size / 2 ** 20:.2f} MiB | {steps} steps at scales "
+                     f"{scales}, {data.get('samples', '?')} shapes, "
+                     f"{training.get('train_seconds', 0) / 60:.0f} min on "
+                     f"{_trained_on(training)}{_lineage_total(training)} |")
     return "\n".join(lines)
 
 
@@ -310,16 +323,10 @@ def _lineage_total(training: dict) -> str:
             f"{training['total_train_seconds'] / 60:.0f} min of steps in all)")
 
 
-def _torch_threads() -> int:
-    import torch
+def _inference_threads() -> int:
+    from .runtime.parallel import get_threads
 
-    return torch.get_num_threads()
-
-
-def _torch_version() -> str:
-    import torch
-
-    return torch.__version__
+    return get_threads()
 
 
 # -- picture ----------------------------------------------------------------------------------
@@ -425,7 +432,8 @@ def _draw(ax, vertices, faces, reference):
     ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors=(0.1, 0.1, 0.2, 0.4),
                                          linewidths=width))
     lo, hi = reference.min(0), reference.max(0)
-    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42  # < 1/2: the bounding box corners stay empty
+    # < 1/2: the bounding box corners stay empty
+    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42
     for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
         setter(c - half, c + half)
     ax.set_box_aspect((1, 1, 1))

@@ -16,7 +16,7 @@ voxel such a face lies). Measured numbers are in docs/experiments/flat-face-bias
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -46,7 +46,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     """
     vertices, faces, used = checked_surface(vertices, faces, source)
     if not 2 * margin + 1 <= resolution <= 1024:
-        raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], got {resolution}")
+        raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], "
+                        f"got {resolution}")
     # the surface's own extent (a stray vertex must not shrink the shape in its grid)
     lo, hi = used.min(axis=0), used.max(axis=0)
     voxel, counts = grid_layout(hi - lo, resolution, margin)
@@ -87,7 +88,8 @@ def checked_surface(vertices, faces, source: str = "mesh"):
     if faces.size == 0:
         raise MeshError(f"{source}: the mesh has no faces, nothing to voxelise")
     if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
-        raise MeshError(f"{source}: faces must be an (F, 3) integer array, got {faces.shape} {faces.dtype}")
+        raise MeshError(f"{source}: faces must be an (F, 3) integer array, got {faces.shape} "
+                        f"{faces.dtype}")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshError(f"{source}: faces index vertices outside 0..{len(vertices) - 1}")
     used = vertices[np.unique(faces)]
@@ -114,7 +116,8 @@ def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
     if rule not in ("winding", "parity"):
         raise ValueError(f"rule must be 'winding' or 'parity', got {rule!r}")
     # moving the mesh by -jitter is moving every query point by +jitter, for all three axes alike
-    jitter = np.array([tol.ray_jitter[0], tol.ray_jitter[1], 0.5 * (tol.ray_jitter[0] + tol.ray_jitter[1])])
+    jitter = np.array([tol.ray_jitter[0], tol.ray_jitter[1],
+                       0.5 * (tol.ray_jitter[0] + tol.ray_jitter[1])])
     triangles = np.asarray(triangles_fx3x3, dtype=np.float64) - jitter
     votes = np.zeros(dims, dtype=np.uint8)
     for axis in range(3):
@@ -123,7 +126,8 @@ def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
 
 
 def _choose_rule(faces: np.ndarray, rule: str) -> str:
-    """Winding for closed consistently-oriented meshes (every directed edge exactly once), else parity."""
+    """Winding for closed consistently-oriented meshes (every directed edge exactly once), else
+    parity."""
     if rule not in RULES:
         raise MeshError(f"unknown point-in-mesh rule {rule!r}; choose one of {RULES}")
     if rule != "auto":

@@ -16,10 +16,9 @@ import math
 import time
 
 import numpy as np
-import torch
 from scipy.optimize import nnls
 
-from agndc_core import plan
+from agndc_core import pipeline, plan
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.shapes import generate_shape, shape_family
@@ -34,7 +33,7 @@ def main():
     parser.add_argument("--methods", nargs="+", default=["agndc", "undc", "mc", "sharp"])
     parser.add_argument("--threads", type=int, default=1)
     args = parser.parse_args()
-    torch.set_num_threads(args.threads)
+    pipeline.set_inference_threads(args.threads)
     rows = {m: [] for m in [*args.methods, "distance"]}
     for seed in args.seeds:
         vertices, faces = generate_shape(seed)

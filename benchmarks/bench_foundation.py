@@ -10,7 +10,6 @@ Usage: python benchmarks/bench_foundation.py [--repeat 3] [--seed 7]
 import argparse
 import time
 
-import numpy as np
 import trimesh
 
 from agndc_core.contour import dual_contour

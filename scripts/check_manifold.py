@@ -1,7 +1,8 @@
 """Check every method's output on real data: closed, outward, 2-manifold (counts per method).
 
     .venv/bin/python scripts/check_manifold.py ../shared/data/dev --res 64 128 \
-        [--methods mc,mc_taubin,surfacenets,undc,agndc,agndc+bounds,oracle] [--checkpoint agndc=PATH]
+        [--methods mc,mc_taubin,surfacenets,undc,agndc,agndc+bounds,oracle]
+        [--checkpoint agndc=PATH]
 
 Every dev mesh is voxelised at each resolution and every grid file (.binvox, ...) is read as is;
 methods are named as for ``agndc eval`` (a plain learned method sees the grid alone, ``+bounds``

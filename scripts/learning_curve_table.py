@@ -20,8 +20,13 @@ import math
 import re
 from pathlib import Path
 
-from agndc_core.evaluate import (HEADROOM_COLUMNS, METRIC_COLUMNS, headroom_shares,
-                                 markdown_table, summarize_rows)
+from agndc_core.evaluate import (
+    HEADROOM_COLUMNS,
+    METRIC_COLUMNS,
+    headroom_shares,
+    markdown_table,
+    summarize_rows,
+)
 from agndc_core.metrics import REPORT_SCALE
 
 REFERENCE_METHODS = ("mc", "mc_taubin", "surfacenets", "oracle_binary", "oracle")

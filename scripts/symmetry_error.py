@@ -45,7 +45,8 @@ def main() -> None:
     predictors = {"surfacenets": surface_nets_lattice}
     for path in args.checkpoint or [str(default_checkpoint_path("agndc"))]:
         model = load_model(path)
-        # the raw network (canonical=False): the pipeline re-frames shifted grids, which would hide it
+        # the raw network (canonical=False): the pipeline re-frames shifted grids, which would
+        # hide it
         predictors[path] = lambda lat, model=model: predict_lattice(model, lat, canonical=False)[0]
     print(f"{args.mesh or 'box 1 x 0.8 x 0.6'} at {args.res}, {cells.sum()} surface cells; "
           "RMS vertex change in voxels")

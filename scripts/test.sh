@@ -4,6 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+.venv/bin/ruff check .                       # lint rules and banned imports: pyproject.toml
 .venv/bin/python -m pytest -q tests/core "$@"
 bash scripts/setup_bpy_env.sh
 BLENDER_USER_RESOURCES="$(mktemp -d)" TMPDIR="$(mktemp -d)" \

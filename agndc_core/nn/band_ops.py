@@ -35,8 +35,14 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .common import (CELL_CORNERS, cell_surface, child_prediction, cube_offsets, lateral_axes,
-                     snake_corners)
+from .common import (
+    CELL_CORNERS,
+    cell_surface,
+    child_prediction,
+    cube_offsets,
+    lateral_axes,
+    snake_corners,
+)
 from .layout import half_band, snake_margin, surface_distance, torus_periods  # noqa: F401
 
 #: floats per gather buffer (32 MB): bounds memory, keeps the matmul operands cache-friendly

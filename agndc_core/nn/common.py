@@ -3,7 +3,8 @@
 The network is written once (``gdfem.py`` ... ``crpm.py``) against a small set of *spatial* ops
 (``DenseOps`` in ``dense_ops.py``, ``BandOps`` in ``band_ops.py``). Features are channel-last in
 both: ``(B, X, Y, Z, C)`` dense, ``(R, C)`` rows in a band, so every point-wise layer
-(``nn.Linear``, activations, concatenation) is the same code. What the two ops classes share is defined here:
+(``nn.Linear``, activations, concatenation) is the same code. What the two ops classes share is
+defined here (or in ``layout.py``, which the numpy runtime reads too):
 where a snake's taps fall, which lattice corners a cell's 12 edges leave from, and how a coarse
 prediction is re-expressed in its children's frames.
 

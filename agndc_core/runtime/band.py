@@ -14,8 +14,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..nn.layout import (CELL_CORNERS, CELL_EDGE_CORNERS, SNAKE_CORNERS, cube_offsets,
-                         half_band, lateral_axes, surface_distance)
+from ..nn.layout import (
+    CELL_CORNERS,
+    CELL_EDGE_CORNERS,
+    SNAKE_CORNERS,
+    cube_offsets,
+    half_band,
+    lateral_axes,
+    surface_distance,
+)
 from .parallel import for_chunks, scratch
 
 #: output rows per gather-and-multiply chunk: the gathered (rows, k^3 C) block stays in the

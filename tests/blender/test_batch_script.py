@@ -7,11 +7,11 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import RELEASE_ZIP, ROOT
-from helpers import cad_part
 
 from agndc_core.gridio import load_mesh, save_mesh
 from agndc_core.pipeline import remesh_mesh
+from conftest import RELEASE_ZIP, ROOT
+from helpers import cad_part
 
 pytestmark = pytest.mark.blender
 

@@ -8,6 +8,7 @@ import math
 import bpy
 import numpy as np
 import pytest
+
 from helpers import (
     assert_same_object_state,
     block_voxels,

@@ -6,6 +6,10 @@ import threading
 import bpy
 import numpy as np
 import pytest
+
+from agndc_core.gridio import load_grid
+from agndc_core.metrics import evaluate
+from agndc_core.pipeline import remesh, remesh_mesh
 from conftest import WEIGHTS
 from helpers import (
     add_object,
@@ -16,10 +20,6 @@ from helpers import (
     object_state,
     scene_state,
 )
-
-from agndc_core.gridio import load_grid
-from agndc_core.metrics import evaluate
-from agndc_core.pipeline import remesh, remesh_mesh
 
 pytestmark = pytest.mark.blender
 

@@ -11,6 +11,7 @@ import tomllib
 import zipfile
 
 import pytest
+
 from conftest import EXTENSION_ID, RELEASE_ZIP, ROOT
 
 pytestmark = pytest.mark.blender
@@ -29,7 +30,7 @@ TWO_PYTHON_WHEELS = [
     "scikit_image-0.25.2-cp313-cp313-win_amd64.whl",
     f"scipy-1.17.1-cp311-cp311-manylinux_2_27_x86_64.{LINUX}.whl",
     f"scipy-1.18.1-cp313-cp313-manylinux_2_27_x86_64.{LINUX}.whl",
-    f"safetensors-0.8.0-cp310-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+    "safetensors-0.8.0-cp310-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
     "safetensors-0.8.0-cp310-abi3-win_amd64.whl",
     "networkx-3.6.1-py3-none-any.whl",
 ]

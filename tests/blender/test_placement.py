@@ -7,6 +7,7 @@ import math
 import bpy
 import numpy as np
 import pytest
+
 from helpers import (
     assert_same_object_state,
     boxes_overlap,

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 import bpy
 import pytest
+
 from conftest import WEIGHTS
 from helpers import add_object, cad_part, scene_state
 

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO
 
 from agndc_core import batch
 from agndc_core.cli import main
@@ -22,6 +21,7 @@ from agndc_core.gridio import TEMP_MARK, load_grid, save_grid, save_mesh
 from agndc_core.pipeline import remesh_file, resolution_for_voxel_size
 from agndc_core.shapes import generate_shape
 from agndc_core.voxelize import voxelize
+from conftest import REPO
 
 RES = 20  # mesh inputs; grids are used as they are
 N_SPHERES = 100  # kill tests: the run takes about a second after the first output

@@ -9,7 +9,6 @@ from agndc_core.contour_naive import dual_contour_naive
 from agndc_core.grid import pad_to_lattice
 from agndc_core.labels import crossed_edges
 from agndc_core.surfacenets import surface_nets_lattice
-
 from conftest import edge_use_counts
 
 

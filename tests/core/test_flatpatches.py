@@ -7,8 +7,13 @@ import numpy as np
 import pytest
 
 from agndc_core import flatpatches
-from agndc_core.flatpatches import (flatten_patches, flatten_patches_naive, pure_splits,
-                                    snap_to_bounds, snap_to_bounds_naive)
+from agndc_core.flatpatches import (
+    flatten_patches,
+    flatten_patches_naive,
+    pure_splits,
+    snap_to_bounds,
+    snap_to_bounds_naive,
+)
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
 from agndc_core.tolerances import tol

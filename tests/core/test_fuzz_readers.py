@@ -224,7 +224,8 @@ def _timed_read(read, path):
     except Exception as exc:  # judged by the caller
         return None, exc, time.perf_counter() - start
     except ReadTimedOut:
-        raise AssertionError(f"{path.name}: reading hung (stopped after {2 * READ_LIMIT_S} s)")
+        raise AssertionError(f"{path.name}: reading hung (stopped after {2 * READ_LIMIT_S} s)") \
+            from None
     finally:
         if use_alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)

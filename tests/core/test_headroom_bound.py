@@ -12,7 +12,6 @@ from agndc_core.labels import make_labels
 from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.tolerances import tol
 from agndc_core.voxelize import voxelize
-
 from conftest import box, rotation
 
 SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "headroom_bound.py"

@@ -4,14 +4,13 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import randomise_outputs
-
 from agndc_core.errors import AGNDCError, CancelledError, GridError
 from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import BAND_TOLERANCE, TILE_TOLERANCE, predict_lattice, trained_window
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.nn import AGNDCCascade, AGNDCConfig
 from agndc_core.runtime import Network
+from conftest import randomise_outputs
 
 
 def lattice_of(shape, centre, radius, box):

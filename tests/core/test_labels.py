@@ -9,7 +9,6 @@ from agndc_core.labels import make_labels
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.voxelize import voxelize
-
 from conftest import box, cylinder_with_hole, edge_use_counts, rotation, sphere
 
 RES = 32

@@ -117,7 +117,7 @@ def test_patch_table_patches_are_disks():
         inside = [(config >> k) & 1 for k in range(8)]
         label = list(range(12))
 
-        def find(i):
+        def find(i, label=label):
             while label[i] != i:
                 i = label[i]
             return i

@@ -4,12 +4,11 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import randomise_outputs
-
 from agndc_core.errors import ModelError
 from agndc_core.inference import BAND_TOLERANCE
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.nn import AGNDCCascade, AGNDCConfig, AGNDCLoss, undc_baseline
+from conftest import randomise_outputs
 
 
 def blob_lattice(shape=(32, 32, 24)) -> np.ndarray:

@@ -11,8 +11,13 @@ import numpy as np
 import torch
 
 from agndc_core.grid import scale_lattice
-from agndc_core.nn.common import (CELL_CORNERS, cell_surface, child_prediction, snake_corners,
-                                  snake_offsets)
+from agndc_core.nn.common import (
+    CELL_CORNERS,
+    cell_surface,
+    child_prediction,
+    snake_corners,
+    snake_offsets,
+)
 
 
 def test_snake_offsets_are_cumulative_bounded_drifts():

@@ -8,8 +8,13 @@ import trimesh
 
 from agndc_core.grid import VoxelGrid
 from agndc_core.meshcheck import topology_violations
-from agndc_core.normalfilter import (NormalFilter, face_geometry, filter_mesh, filter_mesh_naive,
-                                     keep_orientation)
+from agndc_core.normalfilter import (
+    NormalFilter,
+    face_geometry,
+    filter_mesh,
+    filter_mesh_naive,
+    keep_orientation,
+)
 from agndc_core.pipeline import remesh, taubin_smooth
 
 NOISE = 0.01  # of a unit box tessellated into faces of 1/8: a network's noise in voxel terms

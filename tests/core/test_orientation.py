@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 import trimesh
-from conftest import edge_use_counts
 
 from agndc_core.checkpoint import default_checkpoint_path
 from agndc_core.cli import main
 from agndc_core.grid import VoxelGrid
 from agndc_core.gridio import load_grid, save_grid
 from agndc_core.pipeline import CHECKPOINT_NAMES, orient_to_affine, remesh
+from conftest import edge_use_counts
 
 
 def translated(linear, translation=(0.0, 0.0, 0.0)):

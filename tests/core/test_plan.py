@@ -83,6 +83,11 @@ def test_estimate_grows_with_the_grid():
     assert plan.estimate_seconds("mc", (128, 128, 128), 120_000) < large
     with_distances = plan.estimate_seconds("agndc", (64, 64, 64), 30_000, distances=2)
     assert with_distances > small
+    two = plan.estimate_seconds("agndc", (64, 64, 64), 30_000, threads=2)
+    many = plan.estimate_seconds("agndc", (64, 64, 64), 30_000, threads=64)
+    assert plan.SERIAL_SHARE["agndc"] * small < many < two < small  # more threads help, not fully
+    assert plan.estimate_seconds("mc", (64, 64, 64), 30_000, threads=8) == plan.estimate_seconds(
+        "mc", (64, 64, 64), 30_000)
 
 
 def test_open_edge_count():

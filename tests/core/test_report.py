@@ -9,10 +9,18 @@ import pytest
 import trimesh
 
 from agndc_core.checkpoint import default_checkpoint_path
-from agndc_core.evaluate import (evaluate_meshes, grid_shifts, headroom_line, headroom_lines,
-                                  headroom_shares, method_parts, parse_methods, shift_table,
-                                  summarize_rows)
 from agndc_core.errors import AGNDCError
+from agndc_core.evaluate import (
+    evaluate_meshes,
+    grid_shifts,
+    headroom_line,
+    headroom_lines,
+    headroom_shares,
+    method_parts,
+    parse_methods,
+    shift_table,
+    summarize_rows,
+)
 from agndc_core.grid import VoxelGrid
 from agndc_core.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 

@@ -5,7 +5,6 @@ import sys
 
 import numpy as np
 import pytest
-import torch
 
 from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint, read_safetensors
 from agndc_core.errors import AGNDCError, ModelError

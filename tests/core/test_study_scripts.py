@@ -38,7 +38,8 @@ def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path
     calls = _score(tmp_path, "both_scores full agndc")
     assert len(calls) == 4
     for step in ("000010", "000300"):
-        plain = f"eval DEV --methods agndc --checkpoint agndc={runs}/full/step-{step}.safetensors " \
+        plain = f"eval DEV --methods agndc --checkpoint " \
+                f"agndc={runs}/full/step-{step}.safetensors " \
                 f"--res 64 -o {runs}/eval_full_step-{step}"
         assert plain in calls
         assert f"{plain.replace('eval_full_', 'eval_full_unfiltered_')} --no-normal-filter" \

@@ -4,11 +4,11 @@ mc_taubin through ``pipeline.remesh``."""
 import numpy as np
 import pytest
 import trimesh
-from conftest import edge_use_counts
 
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
 from agndc_core.surfacenets import surface_nets_lattice, surface_nets_offsets_naive
+from conftest import edge_use_counts
 
 
 def random_lattices(count=60, seed=14):

@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from agndc_core.training import train as train_module
 from agndc_core.grid import occupancy_pyramid as sample_pyramid
-from agndc_core.training.crops import (SparseSample, make_crop, random_crop_origin, take,
-                                       valid_cells)
+from agndc_core.training import train as train_module
+from agndc_core.training.crops import SparseSample, make_crop, random_crop_origin, take, valid_cells
 from agndc_core.training.data import build_dataset, flip_permute, load_sample
 from agndc_core.training.train import TrainConfig, Trainer
 

@@ -1,10 +1,8 @@
 import numpy as np
 import pytest
-import trimesh
 
 from agndc_core import MeshError
 from agndc_core.voxelize import voxelize
-
 from conftest import box, cylinder_with_hole, rotation, sphere
 
 
