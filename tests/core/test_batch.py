@@ -162,6 +162,7 @@ def test_agndc_pool_equals_serial_and_single_file(mixed, tmp_path):
         assert (tmp_path / "pool" / name).read_bytes() == (tmp_path / "serial" / name).read_bytes()
 
 
+@pytest.mark.slow
 def test_dask_local_cluster_scheduler(mixed, reference, tmp_path):
     distributed = pytest.importorskip("distributed")
     out = tmp_path / "out"
@@ -179,6 +180,7 @@ def test_dask_local_cluster_scheduler(mixed, reference, tmp_path):
     assert f"{socket.gethostname()}:{os.getpid()}" not in {r["worker"] for r in rows.values()}
 
 
+@pytest.mark.slow
 def test_dask_own_cluster_agndc(mixed, tmp_path):
     """No scheduler: a LocalCluster of 2 processes; the network is loaded by the worker plugin."""
     pytest.importorskip("distributed")
@@ -318,6 +320,7 @@ def spheres(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGKILL])
 def test_killed_run_leaves_no_partial_output(spheres, tmp_path, sig):
     out = tmp_path / "out"

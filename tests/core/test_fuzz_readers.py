@@ -30,7 +30,9 @@ from agndc_core.gridio import load_grid, load_mesh, save_grid
 GRID_FORMATS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
 MESH_FORMATS = (".obj", ".stl", ".ply")
 MUTANTS_PER_FORMAT = 150
-READ_LIMIT_S = 2.0
+#: a read still running after this many seconds has hung (a hang guard, not a speed test: a
+#: reader that loops on a hostile header never returns; a loaded machine is slow, not stuck)
+HANG_S = 60.0
 SEED = 1414
 #: huge or hostile replacements for numbers in text headers (npy dict, binvox, ply, obj)
 HUGE_TEXT = (b"4294967296", b"99999999999999999999999", b"-1", b"0", b"2147483647", b"1e308",
@@ -217,15 +219,14 @@ def _timed_read(read, path):
     use_alarm = hasattr(signal, "setitimer") and main_thread
     if use_alarm:
         previous = signal.signal(signal.SIGALRM, _alarm)
-        signal.setitimer(signal.ITIMER_REAL, 2 * READ_LIMIT_S)
+        signal.setitimer(signal.ITIMER_REAL, HANG_S)
     start = time.perf_counter()
     try:
         return read(path), None, time.perf_counter() - start
     except Exception as exc:  # judged by the caller
         return None, exc, time.perf_counter() - start
     except ReadTimedOut:
-        raise AssertionError(f"{path.name}: reading hung (stopped after {2 * READ_LIMIT_S} s)") \
-            from None
+        raise AssertionError(f"{path.name}: reading hung (stopped after {HANG_S} s)") from None
     finally:
         if use_alarm:
             signal.setitimer(signal.ITIMER_REAL, 0)
@@ -260,8 +261,7 @@ def test_corrupt_files_are_read_or_refused(tmp_path, ext):
     for number, (mutation, data) in enumerate(_mutants(seeds, ext, rng)):
         path = tmp_path / f"m{number:03d}-{mutation}{ext}"
         path.write_bytes(data)
-        result, error, seconds = _timed_read(read, path)
-        assert seconds < READ_LIMIT_S, f"{path.name}: reading took {seconds:.1f} s"
+        result, error, _ = _timed_read(read, path)
         if error is None:
             check(result)
             outcomes["read fine"] += 1

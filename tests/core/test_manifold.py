@@ -96,6 +96,7 @@ def run_property(method: str) -> tuple[int, dict]:
     return grids, totals
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["dual_contour", "mc"])
 def test_random_grids_give_closed_oriented_manifolds(method):
     start = time.perf_counter()

@@ -77,6 +77,7 @@ def test_rotated_box_is_a_closed_turned_box():
     assert not np.allclose(np.abs(mesh.face_normals).max(axis=1), 1.0)  # off the axes
 
 
+@pytest.mark.slow
 def test_report_on_a_small_folder(tmp_path):
     folder = tmp_path / "meshes"
     folder.mkdir()
@@ -229,6 +230,7 @@ def test_models_table_says_where_the_weights_were_trained():
     assert _trained_on(resumed) == "CPU + NVIDIA H200"
 
 
+@pytest.mark.slow
 def test_demo_the_readme_opens_with(tmp_path, capsys):
     """``agndc demo`` (the README's first command, at a small size): every method's mesh, the
     grid, and a table with one row per method."""

@@ -33,7 +33,10 @@ def shipped(request):
     return load_checkpoint(path)[0], load_network(path)
 
 
-@pytest.mark.parametrize("size, seed, tile", [(24, 1, 0), (40, 2, 0), (56, 3, 0), (56, 3, 24)])
+@pytest.mark.parametrize("size, seed, tile", [
+    (24, 1, 0), (40, 2, 0),
+    pytest.param(56, 3, 0, marks=pytest.mark.slow),
+    pytest.param(56, 3, 24, marks=pytest.mark.slow)])
 def test_shipped_networks_match_torch(shipped, size, seed, tile):
     """Vertices within 1e-4 voxel of the torch path, untiled and tiled (then both tile alike);
     edge probabilities within 1e-4 too."""

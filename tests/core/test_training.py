@@ -256,6 +256,7 @@ def test_quadric_floor_reaches_every_scale_loss(data_dir, tmp_path):
     assert Trainer(_config(data_dir, tmp_path / "default")).losses[0].quadric_floor == 0.1
 
 
+@pytest.mark.slow
 def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_path):
     """An untrained network *is* surface nets (zero vertex heads + prior); a short run must do
     clearly better than that on batches it never saw. The single-scale plain-conv network
@@ -279,6 +280,7 @@ def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_
     assert info["done"]
 
 
+@pytest.mark.slow
 def test_resume_is_bit_exact(data_dir, tmp_path):
     whole = Trainer(_config(data_dir, tmp_path / "whole"))
     whole.run(progress=False)
@@ -320,6 +322,7 @@ def test_a_run_resumed_elsewhere_records_both_machines(data_dir, tmp_path):
     assert "from scale 2 step 1" in meta["training"]["hardware"]
 
 
+@pytest.mark.slow
 def test_a_warm_started_checkpoint_carries_its_lineage(data_dir, tmp_path):
     """Weights continued through --init say which runs they descend from, oldest first, and
     how long all of them trained: shipped weights describe themselves without hand edits."""
@@ -503,6 +506,7 @@ def test_weight_average_follows_the_steps_and_leaves_the_raw_weights(data_dir, t
         assert torch.equal(p, w2[k]), k
 
 
+@pytest.mark.slow
 def test_checkpoint_keeps_the_average_and_resume_is_bit_exact(data_dir, tmp_path):
     """A run with a weight average, stopped after every step and resumed, ends with the same
     checkpoint as one uninterrupted run; the checkpoint differs from an unaveraged run."""
