@@ -7,7 +7,7 @@ cannot be typed."""
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
-from ._core import plan
+from ._core import methods, plan
 
 RESOLUTION_MIN, RESOLUTION_DEFAULT, RESOLUTION_MAX = plan.RESOLUTION_MIN, 64, plan.RESOLUTION_MAX
 #: default voxel size in world units: the default 2 m cube becomes a 42³ grid
@@ -16,16 +16,12 @@ VOXEL_SIZE_DEFAULT = 0.05
 #: RESOLUTION_MAX and grid.MAX_VOXELS, with a message naming the size that works
 VOXEL_SIZE_MIN = 1e-5
 
-METHOD_ITEMS = (
-    ("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring (shipped weights)"),
-    ("undc", "UNDC", "Single-scale neural dual contouring baseline (needs its weights)"),
-    ("mc", "Marching Cubes", "Marching cubes of the same grid (no network)"),
-    ("sharp", "Sharp (exact dual contouring)",
-     "Dual contouring of the mesh's own exact intersections and normals: flat faces and sharp "
-     "edges (meshes only; no network)"),
-)
+#: the add-on's methods, from the core's registry (``agndc_core/methods.py``)
+METHOD_ITEMS = tuple((m.name, methods.title(m.name), m.description)
+                     for m in methods.REGISTRY if m.in_blender)
 #: methods of the grid importer: a grid alone has no exact surface to contour
-GRID_METHOD_ITEMS = METHOD_ITEMS[:3]
+GRID_METHOD_ITEMS = tuple(item for item in METHOD_ITEMS
+                          if not methods.BY_NAME[item[0]].mesh_only)
 
 SIZE_MODE_ITEMS = (
     ("VOXEL_SIZE", "Voxel Size", "Voxel edge in world units, as in Blender's Voxel Remesh"),

@@ -34,11 +34,13 @@ from mathutils import Matrix
 from . import mesh_io
 from ._core import checkpoint as checkpoint_module
 from ._core import errors, gridio, metrics, pipeline, plan, voxelize
+from ._core import methods as registry
 
 #: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
 #: object-name suffix per method
-SUFFIXES = {"agndc": "AGNDC", "undc": "UNDC", "mc": "MC", "sharp": "Sharp"}
+#: object-name suffix of each of the add-on's methods (the registry's labels)
+SUFFIXES = {name: registry.BY_NAME[name].label for name in registry.BLENDER_METHODS}
 #: surface samples per mesh for the Chamfer distance in the report (the paper's metric, fewer
 #: samples than its 100k so the report costs a fraction of the remesh)
 DISTANCE_SAMPLES = 30_000

@@ -17,7 +17,7 @@ Blender object, the Blender batch script).
   run left are removed when the next run starts. A completed run rewrites the table in input
   order.
 * **Engines.** ``"local"``: with one worker the jobs run in this process; with more, in a pool
-  of ``spawn``-ed processes, each loading the network once (``prepare_worker``) and giving torch
+  of ``spawn``-ed processes, each loading the network once (``prepare_worker``) and giving it
   ``cores // workers`` threads. A worker that dies (out of memory, a crash in a library) fails
   only its own file: the jobs it may have held are re-run one at a time in a fresh process.
   ``"dask"``: the same jobs on a Dask distributed cluster (``batch_dask``).
@@ -30,18 +30,20 @@ import multiprocessing
 import os
 import re
 import signal
-import socket
-import sys
 import threading
 import time
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
+from .batch_job import (  # noqa: F401  (one job: defined there, part of this module's API)
+    BatchOptions,
+    Job,
+    failed_row,
+    prepare_worker,
+    run_job,
+)
 from .errors import AGNDCError
 from .gridio import (
     GRID_EXTENSIONS,
@@ -50,9 +52,8 @@ from .gridio import (
     TEMP_MARK,
     is_grid_path,
     is_mesh_path,
-    save_mesh,
 )
-from .pipeline import CHECKPOINT_NAMES, MESH_ONLY_METHODS, METHODS, remesh, remesh_file
+from .pipeline import CHECKPOINT_NAMES, METHODS
 
 CSV_NAME = "batch.csv"
 #: columns of batch.csv: grid is the remeshed grid's shape (X x Y x Z), seconds the job's wall
@@ -66,33 +67,6 @@ ENGINES = ("local", "dask")
 #: enough that a dying worker leaves a short list of suspects
 IN_FLIGHT_PER_WORKER = 2
 _TEMP_NAME = re.compile(re.escape(TEMP_MARK) + r"\d+\.")
-_PREPARED: dict = {}  # per process: the (options, threads) a worker was prepared for
-
-
-@dataclass(frozen=True)
-class BatchOptions:
-    """How every file of a batch is remeshed (``pipeline.remesh_file`` arguments; picklable)."""
-
-    method: str = "agndc"
-    resolution: int = 64  # voxels on a mesh's longest side (grids are used as they are)
-    voxel_size: float | None = None  # instead of resolution: voxels of at most this size
-    model_index: int = 0  # .vox files: which model
-    checkpoint: str | None = None  # learned methods: None = the shipped weights
-    device: str = "cpu"
-    min_component_faces: int = 0
-    threads: int | None = None  # torch threads per job; None = the worker's share of the cores
-    flat_patches: bool = True  # learned methods: flat voxel-face patches come out flat
-    normal_filter: bool = True  # learned methods: the mesh denoised, its creases kept
-    source_bounds: bool = True  # dual methods on meshes: bounding faces on the mesh's box
-
-
-@dataclass(frozen=True)
-class Job:
-    """One input file and the output file it becomes (absolute paths, so any worker can use
-    them on a shared filesystem)."""
-
-    input: str
-    output: str
 
 
 # --- inputs ---------------------------------------------------------------------------------
@@ -206,96 +180,12 @@ def _unique(jobs: list[Job]) -> list[Job]:
     return list(by_output.values())
 
 
-# --- one job --------------------------------------------------------------------------------
-
-
-def run_job(job: Job, options: BatchOptions) -> dict:
-    """Remesh one file and write its output; a row for batch.csv. Bad input is a failed row.
-
-    The output is written through ``gridio.save_mesh`` (temporary name, then an atomic rename).
-    KeyboardInterrupt and other BaseExceptions propagate (nothing partial is left behind).
-    """
-    start = time.perf_counter()
-    row = {"input": job.input, "output": job.output, "method": options.method}
-    try:
-        result = remesh_file(job.input, method=options.method, resolution=options.resolution,
-                             voxel_size=options.voxel_size, model_index=options.model_index,
-                             checkpoint=options.checkpoint, threads=options.threads,
-                             device=options.device,
-                             min_component_faces=options.min_component_faces,
-                             flat_patches=options.flat_patches,
-                             normal_filter=options.normal_filter,
-                             source_bounds=options.source_bounds)
-        Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        save_mesh(result.vertices, result.faces, job.output)
-        row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),
-                   vertices=len(result.vertices), status="ok", error="")
-    except AGNDCError as exc:
-        row.update(status="failed", error=str(exc))
-    except Exception as exc:  # a bug or a library's surprise: still only this file's failure
-        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
-    row.update(seconds=f"{time.perf_counter() - start:.3f}", **_process_stats())
-    return row
-
-
-def failed_row(job: Job, options: BatchOptions, error: str) -> dict:
-    """The row of a job that ended without its own row (its worker died)."""
-    return {"input": job.input, "output": job.output, "method": options.method,
-            "status": "failed", "error": error}
-
-
 def is_done(job: Job) -> bool:
     """True when the job's output exists and is at least as new as its input."""
     try:
         return os.stat(job.output).st_mtime_ns >= os.stat(job.input).st_mtime_ns
     except OSError:
         return False
-
-
-def prepare_worker(options: BatchOptions, threads: int | None) -> None:
-    """Once per worker process: torch's share of the cores, and a warm-up remesh of a 2x2x2
-    grid, which imports what the method needs and loads its network into ``pipeline``'s
-    per-process model cache, so no job loads or receives it again (and a job's seconds are its
-    own work)."""
-    key = (options, threads)
-    if _PREPARED.get("key") == key:
-        return
-    if options.method not in MESH_ONLY_METHODS:  # those need a mesh: nothing to warm up
-        remesh(np.ones((2, 2, 2), dtype=bool), method=options.method,
-               checkpoint=options.checkpoint, device=options.device)
-    if threads and "torch" in sys.modules:  # marching cubes never imports torch
-        sys.modules["torch"].set_num_threads(int(threads))
-    _PREPARED["key"] = key
-
-
-def _default_checkpoint(method: str) -> Path:
-    from .checkpoint import default_checkpoint_path
-
-    return default_checkpoint_path(CHECKPOINT_NAMES[method])
-
-
-def _process_stats() -> dict:
-    """Peak resident memory (MB) of this process so far ("" where the OS does not say), and
-    which process this is (host:pid)."""
-    return {"peak_rss_mb": _peak_rss_mb(), "worker": f"{socket.gethostname()}:{os.getpid()}"}
-
-
-def _peak_rss_mb() -> str:
-    # Linux: VmHWM is this process image's own peak; getrusage's ru_maxrss would also count
-    # the parent's memory at fork, which a spawned worker inherits across exec
-    try:
-        with open("/proc/self/status", encoding="ascii") as status:
-            for line in status:
-                if line.startswith("VmHWM:"):
-                    return f"{int(line.split()[1]) / 1024:.0f}"  # kB
-    except OSError:
-        pass
-    try:
-        import resource  # POSIX only
-    except ImportError:
-        return ""
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # macOS: bytes, else KiB
-    return f"{peak / (1 << 20 if sys.platform == 'darwin' else 1024):.0f}"
 
 
 def cpu_count() -> int:
@@ -509,7 +399,7 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
 
     try:
         if engine == "dask":
-            from .batch_dask import run_dask
+            from .batch_dask import run_dask  # batch_dask imports batch_job, not this module
 
             run_dask(todo, batch, workers, scheduler, on_row)
         elif workers == 1 or len(todo) <= 1:
@@ -539,7 +429,10 @@ def _check_arguments(options: BatchOptions, fmt, workers, engine, scheduler) -> 
     if options.voxel_size is not None and not options.voxel_size > 0:
         raise AGNDCError(f"voxel size must be positive, got {options.voxel_size}")
     if options.method in CHECKPOINT_NAMES:  # fail before the workers start, not once per file
-        checkpoint = Path(options.checkpoint or _default_checkpoint(options.method))
+        from .checkpoint import default_checkpoint_path
+
+        default = default_checkpoint_path(CHECKPOINT_NAMES[options.method])
+        checkpoint = Path(options.checkpoint or default)
         if not checkpoint.is_file():
             raise AGNDCError(f"checkpoint not found: {checkpoint}")
 

@@ -1,7 +1,7 @@
 """The Dask engine of ``batch.remesh_many`` (``agndc batch --engine dask``).
 
 Imported only when that engine is chosen: ``dask[distributed]`` is an optional extra
-(``pip install 'agndc-remesher[dask]'``). The jobs are ``batch.run_job`` calls on the cluster's
+(``pip install 'agndc-remesher[dask]'``). The jobs are ``batch_job.run_job`` calls on the cluster's
 workers, which read the inputs and write the outputs themselves (paths are absolute, so the
 workers need the same filesystem, and ``agndc_core`` installed). A ``WorkerPlugin`` prepares
 every worker once, also workers that join later: torch's share of the host's cores and the
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections import Counter
 
-from .batch import BatchOptions, failed_row, prepare_worker, run_job
+from .batch_job import BatchOptions, failed_row, prepare_worker, run_job
 from .errors import AGNDCError
 
 try:
@@ -35,7 +35,7 @@ NO_MALLOC_TRIM = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
 
 
 class PrepareWorker(WorkerPlugin):
-    """Runs ``batch.prepare_worker`` on every worker as it starts (or at registration).
+    """Runs ``batch_job.prepare_worker`` on every worker as it starts (or at registration).
 
     Torch threads per task: ``options.threads`` if given, else the worker host's cores divided by
     the task threads of all workers on that host (``host_threads``, counted at registration;

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from .errors import AGNDCError
-from .pipeline import METHODS
+from .methods import METHODS, REGISTRY
 
 
 def main(argv=None) -> int:
@@ -41,9 +41,7 @@ def _parser() -> argparse.ArgumentParser:
                    "(.npy .npz .binvox .vox .nii .nii.gz)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output .obj/.ply/.stl/.glb")
     p.add_argument("--method", choices=METHODS, default="agndc",
-                   help="agndc, undc (networks), surfacenets, mc, mc_taubin (no weights), "
-                   "sharp (exact dual contouring of the mesh's own surface; mesh input only), "
-                   "oracle (the same, named for evaluation)")
+                   help="; ".join(f"{m.name}: {m.description}" for m in REGISTRY))
     _add_remesh_options(p)
     p.add_argument("--threads", type=int, help="CPU threads for the network")
     p.set_defaults(func=_cmd_remesh)
@@ -267,8 +265,9 @@ def _cmd_demo(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     vertices, faces = cad_part(args.seed)
     save_mesh(vertices, faces, out / "part.obj")
-    methods = ["mc", "mc_taubin", "surfacenets", "oracle"] + [m for m in ("undc", "agndc")
-                                                           if _has_weights(m)]
+    # every method a mesh allows, learned ones where their weights are shipped
+    methods = [m.name for m in REGISTRY if m.name not in ("sharp", "oracle_binary")
+               and (m.weights is None or _has_weights(m.name))]
     rows = []
     for method in methods:
         result = remesh_mesh(vertices, faces, resolution=args.res, method=method, source="part",

@@ -191,6 +191,31 @@ def scale_lattice(level: int) -> tuple[float, float]:
     return (spacing - 1.0) / 2.0, spacing
 
 
+def crossed_edges(inside: np.ndarray) -> np.ndarray:
+    """(D) bool -> (D, 3) bool: edge p -> p + e_axis joins an inside and an outside point."""
+    edge = np.zeros(inside.shape + (3,), dtype=bool)
+    edge[:-1, :, :, 0] = inside[:-1] != inside[1:]
+    edge[:, :-1, :, 1] = inside[:, :-1] != inside[:, 1:]
+    edge[:, :, :-1, 2] = inside[:, :, :-1] != inside[:, :, 1:]
+    return edge
+
+
+def surface_cells(edge: np.ndarray) -> np.ndarray:
+    """(D, 3) bool edges -> (D) bool cells having any crossed edge among their 12.
+
+    Cell c's x-edges start at c, c+e_y, c+e_z, c+e_y+e_z (likewise for y and z), so a crossed
+    edge at point p marks the cells p, p - e_b, p - e_c, p - e_b - e_c for its two other axes.
+    """
+    cells = np.zeros(edge.shape[:3], dtype=bool)
+    inner = tuple(n - 1 for n in edge.shape[:3])  # cells need their far corner
+    for axis, start in CELL_EDGES:
+        # cell c has the edge leaving point c + start along axis
+        cells[:inner[0], :inner[1], :inner[2]] |= edge[
+            start[0]:start[0] + inner[0], start[1]:start[1] + inner[1],
+            start[2]:start[2] + inner[2], axis]
+    return cells
+
+
 def occupancy_pyramid(lattice: np.ndarray, levels: int) -> list[np.ndarray]:
     """[G_0, ..., G_levels]: the lattice and its OR-pooled coarser scales (``pool_occupancy``)."""
     grids = [np.asarray(lattice, dtype=bool)]

@@ -34,7 +34,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .grid import CASCADE_LEVELS, CELL_EDGES, LATTICE_PAD, VoxelGrid, pad_to_lattice, scale_lattice
+from .grid import (  # noqa: F401  (lattice topology lives in grid.py; re-exported here)
+    CASCADE_LEVELS,
+    CELL_EDGES,
+    LATTICE_PAD,
+    VoxelGrid,
+    crossed_edges,
+    pad_to_lattice,
+    scale_lattice,
+    surface_cells,
+)
 from .tolerances import tol
 from .voxelize import _choose_rule, check_mesh, inside_points
 
@@ -122,31 +131,6 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[Scale
         vertex, quadric = cell_vertices(points, normals, surface, frame, faces)
         labels.append(ScaleLabels(inside, edge, surface, vertex, quadric))
     return labels
-
-
-def crossed_edges(inside: np.ndarray) -> np.ndarray:
-    """(D) bool -> (D, 3) bool: edge p -> p + e_axis joins an inside and an outside point."""
-    edge = np.zeros(inside.shape + (3,), dtype=bool)
-    edge[:-1, :, :, 0] = inside[:-1] != inside[1:]
-    edge[:, :-1, :, 1] = inside[:, :-1] != inside[:, 1:]
-    edge[:, :, :-1, 2] = inside[:, :, :-1] != inside[:, :, 1:]
-    return edge
-
-
-def surface_cells(edge: np.ndarray) -> np.ndarray:
-    """(D, 3) bool edges -> (D) bool cells having any crossed edge among their 12.
-
-    Cell c's x-edges start at c, c+e_y, c+e_z, c+e_y+e_z (likewise for y and z), so a crossed
-    edge at point p marks the cells p, p - e_b, p - e_c, p - e_b - e_c for its two other axes.
-    """
-    cells = np.zeros(edge.shape[:3], dtype=bool)
-    inner = tuple(n - 1 for n in edge.shape[:3])  # cells need their far corner
-    for axis, start in CELL_EDGES:
-        # cell c has the edge leaving point c + start along axis
-        cells[:inner[0], :inner[1], :inner[2]] |= edge[
-            start[0]:start[0] + inner[0], start[1]:start[1] + inner[1],
-            start[2]:start[2] + inner[2], axis]
-    return cells
 
 
 def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:

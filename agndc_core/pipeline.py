@@ -44,17 +44,14 @@ import numpy as np
 
 from .contour import dual_contour
 from .errors import AGNDCError, CancelledError, MeshError
-from .grid import LATTICE_PAD, VoxelGrid, lattice_to_world, pad_to_lattice
-from .labels import crossed_edges
+from .grid import LATTICE_PAD, VoxelGrid, crossed_edges, lattice_to_world, pad_to_lattice
+from .methods import (  # noqa: F401  (the registry's lists, re-exported: one definition)
+    BOUNDED_METHODS,
+    CHECKPOINT_NAMES,
+    MESH_ONLY_METHODS,
+    METHODS,
+)
 
-METHODS = ("agndc", "undc", "surfacenets", "mc", "mc_taubin", "oracle", "oracle_binary", "sharp")
-#: methods that contour the source mesh's own intersections: mesh input only
-MESH_ONLY_METHODS = ("oracle", "oracle_binary", "sharp")
-#: default checkpoint name per learned method (agndc_core/weights/<name>.safetensors)
-CHECKPOINT_NAMES = {"agndc": "agndc", "undc": "undc"}
-#: methods whose dual vertices can be put on a voxelised mesh's bounding box
-#: (``remesh(source_bounds=True)``); the oracles keep their own definitions
-BOUNDED_METHODS = ("agndc", "undc", "surfacenets")
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10

@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .labels import crossed_edges, surface_cells
+from .grid import crossed_edges, surface_cells
 
 #: vertex predictor: (X, Y, Z) bool lattice -> (X, Y, Z, 3) offsets of each cell's vertex from its
 #: min corner, in voxels (``surface_nets_lattice``, ``inference.predict_lattice``'s vertices)

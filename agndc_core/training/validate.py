@@ -11,8 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..contour import dual_contour
-from ..grid import lattice_to_world
-from ..labels import crossed_edges
+from ..grid import crossed_edges, lattice_to_world
 from ..mc import marching_cubes_lattice
 from ..metrics import evaluate, format_row
 from .data import load_sample, sample_mesh
