@@ -74,9 +74,13 @@ def guarded(name, *args, **kwargs):
     return real(name, *args, **kwargs)
 builtins.__import__ = guarded
 sys.path.insert(0, {str(stage)!r})
+import importlib, pkgutil
 import numpy as np
+import agndc_core
 from agndc_core import pipeline
 assert pipeline.__file__.startswith({str(stage)!r})
+for module in pkgutil.walk_packages(agndc_core.__path__, "agndc_core."):
+    importlib.import_module(module.name)  # every staged module's imports are staged too
 x, y, z = np.meshgrid(*[np.arange(16)] * 3, indexing="ij")
 ball = ((x - 7) ** 2 + (y - 8) ** 2 + (z - 7) ** 2) < 25
 for method in ("agndc", "undc", "surfacenets", "mc", "mc_taubin"):
