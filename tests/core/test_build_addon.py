@@ -73,6 +73,8 @@ def guarded(name, *args, **kwargs):
         raise ImportError(name + " is not bundled")
     return real(name, *args, **kwargs)
 builtins.__import__ = guarded
+# only the staged folder: the editable install's finder would fill in what staging left out
+sys.meta_path = [f for f in sys.meta_path if "editable" not in getattr(f, "__module__", "")]
 sys.path.insert(0, {str(stage)!r})
 import importlib, pkgutil
 import numpy as np
