@@ -146,7 +146,8 @@ def trained_window(lattice: np.ndarray):
     Training samples are voxelised meshes, so every shape starts exactly
     ``1 + grid.LATTICE_PAD`` points from the lattice's low end (``voxelize`` keeps one empty
     voxel, ``pad_to_lattice`` adds one layer), and the network learned its low-end border there:
-    one more empty layer in front moves a box face by 0.25 voxel (docs/training.md). User grids
+    one more empty layer in front moves a box face by 0.25 voxel
+    (docs/experiments/flat-face-bias.md). User grids
     (binvox, .vox, arrays) come with any margin, so the occupied box is re-framed exactly as
     ``pad_to_lattice`` frames a tight voxelisation. Only empty points are added or dropped.
 

@@ -1,4 +1,4 @@
-"""Geometric accuracy on analytic solids (issue 11's acceptance numbers), every method side by side.
+"""Geometric accuracy on analytic solids (the geometric quality targets), every method side by side.
 
     .venv/bin/python benchmarks/bench_geometry.py [--res 64] [--checkpoint agndc=PATH ...]
         [--no-flat-patches] [--no-normal-filter] [--source-bounds]

@@ -99,7 +99,8 @@ class AGNDCCascade(nn.Module):
         gradient proportional to the other's weights. Their vertex rows keep their random
         start and carry the trunk's features into CRPM, as the edge rows do, and a warm
         restart keeps what they learned. (Measured from scratch: no change in 600 steps; the
-        stall of that run was the targets' layer noise, docs/training.md, eleventh session.)"""
+        stall of that run was the targets' layer noise,
+        docs/experiments/binary-targets-curriculum.md.)"""
         root = root or self
         nets = [root] if isinstance(root, AGDRNet) else [m for m in root.modules()
                                                            if isinstance(m, AGDRNet)]

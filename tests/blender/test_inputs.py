@@ -82,7 +82,7 @@ def _bevelled_cube(width=0.3, segments=1, rotate=False):
 
 
 def test_modifiers_are_applied_unless_asked_not_to(addon):
-    """The issue's cube with an unapplied Bevel: remeshed as shown, or as its base mesh."""
+    """A cube with an unapplied Bevel: remeshed as shown, or as its base mesh."""
     cube = _bevelled_cube(width=0.3, segments=3)
     evaluated = cube.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
     shown = signed_volume(*addon.mesh_io.mesh_arrays(evaluated))

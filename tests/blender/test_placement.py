@@ -20,7 +20,7 @@ pytestmark = pytest.mark.blender
 
 
 def _sphere_and_cube():
-    """The issue's scene: a sphere with a cube right where a naive "+X" result would go."""
+    """A sphere with a cube right where a naive "+X" result would go."""
     bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(0.0, 0.0, 0.0))
     sphere = bpy.context.object
     bpy.ops.mesh.primitive_cube_add(size=2.0, location=(3.0, 0.0, 0.0))

@@ -1,4 +1,4 @@
-"""Batch remeshing (issue 13): ``agndc batch`` and ``batch.remesh_many`` on mixed folders,
+"""Batch remeshing: ``agndc batch`` and ``batch.remesh_many`` on mixed folders,
 manifests, a local process pool and a Dask LocalCluster; resumability, failure isolation, and
 what a Ctrl-C or kill leaves behind. Outputs are compared byte for byte with ``agndc remesh``."""
 

@@ -1,4 +1,4 @@
-"""Outward faces in world coordinates for every affine, mirrored ones included (issue 14)."""
+"""Outward faces in world coordinates for every affine, mirrored ones included."""
 
 import numpy as np
 import pytest

@@ -20,7 +20,7 @@ RESOLUTION = 48
 N_SAMPLES = 30_000
 #: worst CD ratio to marching cubes allowed on any one held-out part
 MAX_RATIO_TO_MC = 1.1
-#: the packaged weights together must stay under the issue's 25 MB budget
+#: the packaged weights together must stay under a 25 MB budget (the extension's size)
 WEIGHTS_BUDGET_BYTES = 25 * 1024 * 1024
 
 
@@ -66,7 +66,7 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
                                   n_samples=N_SAMPLES)["cd"])
     # a broken checkpoint (e.g. offsets pushed out of their cells) is far worse than marching
     # cubes on every part; a good one may still lose a little on a mostly axis-aligned CAD part,
-    # where the grid pins nothing down (the weights of 2026-11-24: 4 % on seed 7000003)
+    # where the grid pins nothing down (an earlier shipped network: 4 % on seed 7000003)
     ratio = np.array(cd[method]) / np.array(cd["mc"])
     assert np.all(ratio < MAX_RATIO_TO_MC) and np.mean(ratio < 1.0) >= 2 / 3, cd
     # weights that learned nothing return surface nets (the prior): they must do better
@@ -75,9 +75,9 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
 
 @pytest.mark.slow
 def test_shipped_agndc_meets_the_geometric_targets(tmp_path):
-    """Issue 11's analytic solids at 64³ (agndc_core/solids.py): flat box faces, the rotated
-    box's faces and a sphere within their targets; the rotated box's corners (target 0.5 voxel,
-    not met yet: 0.88 on 2026-11-25) at least nearer than surface nets puts them.
+    """The analytic solids at 64³ (agndc_core/solids.py): flat box faces, the rotated box's
+    faces and a sphere within their targets; the rotated box's corners (target 0.5 voxel, not
+    met: 0.88 measured) at least nearer than surface nets puts them.
 
     The normal filter alone takes surface nets' faces and sphere within the targets too (0.058
     and 0.069 voxel), so the network must earn them twice: its own vertices, unfiltered, meet

@@ -303,7 +303,7 @@ def test_resume_is_bit_exact(data_dir, tmp_path):
 
 
 def test_a_run_resumed_elsewhere_records_both_machines(data_dir, tmp_path):
-    """Steps run on one machine and finished on another (the CPU, then a lent GPU): the
+    """Steps run on one machine and finished on another (the CPU, then a GPU): the
     checkpoint says where each part ran, not only the last machine's name."""
     from agndc_core.checkpoint import load_checkpoint
 
