@@ -128,3 +128,19 @@ print("torch" in sys.modules)
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "False"
+
+
+def test_automatic_threads_come_back_after_a_one_thread_run():
+    """threads=None means every core this process may use, whatever an earlier call asked."""
+    from agndc_core.pipeline import remesh
+    from agndc_core.runtime.parallel import default_threads
+
+    grid = np.pad(np.ones((5, 6, 4), dtype=bool), 2)
+    before = get_threads()
+    try:
+        remesh(grid, method="agndc", threads=1)
+        assert get_threads() == 1
+        remesh(grid, method="agndc")
+        assert get_threads() == default_threads()
+    finally:
+        set_threads(before)
