@@ -105,7 +105,8 @@ def confirm_message(jobs) -> str:
         return ""
     grids = ", ".join(f"{job.name} {'×'.join(map(str, job.shape))}" for job in ready[:4])
     more = f" and {len(ready) - 4} more" if len(ready) > 4 else ""
-    return (f"{len(ready)} object{'s' * (len(ready) != 1)} ({grids}{more}): "
+    kind = "grid" if all(job.grid_path is not None for job in ready) else "object"
+    return (f"{len(ready)} {kind}{'s' * (len(ready) != 1)} ({grids}{more}): "
             f"{format_seconds(seconds)}. Esc cancels while it runs.")
 
 
@@ -366,6 +367,8 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
                              "(0 = the first)", default=0, min=0, max=10_000,
                              options={"SKIP_SAVE"})
     use_modal: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
+    # set on the second call of a long import: ask (invoke) or run (execute) without asking again
+    confirm: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
 
     @classmethod
     def poll(cls, context):
@@ -383,6 +386,15 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
 
     def invoke(self, context, event):
         self.use_modal = not bpy.app.background
+        if self.confirm:  # a long import, asked once the files are chosen (see execute)
+            try:
+                remesh = _backend()
+                jobs = remesh.grid_jobs(self.paths(), self.settings(context, remesh))
+            except Exception as exc:
+                return self.handle(exc)
+            return context.window_manager.invoke_confirm(
+                self, event, title="Import with AGNDC", message=confirm_message(jobs),
+                confirm_text="Import", icon="WARNING")
         if self.properties.is_property_set("filepath") or self.files:  # dropped files
             popup = getattr(ImportHelper, "invoke_popup", None)
             if popup is not None:
@@ -400,6 +412,14 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
             jobs = remesh.grid_jobs(self.paths(), settings)
         except Exception as exc:
             return self.handle(exc)
+        if modal and not self.confirm and confirm_message(jobs):
+            # the grids are read only now (their size gives the estimate): call this operator
+            # again to ask, as a mesh run above the threshold asks before it starts
+            values = self.as_keywords(ignore=("files", "filter_glob", "confirm", "use_modal"))
+            bpy.ops.import_mesh.agndc_grid("INVOKE_DEFAULT", confirm=True,
+                                           files=[{"name": f.name} for f in self.files],
+                                           **values)
+            return {"CANCELLED"}
         return self.run(context, remesh, jobs, settings, modal)
 
     def draw(self, context):

@@ -106,11 +106,12 @@ class Job:
     resolution: int = 0  # planned grid (mesh input)
     shape: tuple = ()
     grid_path: str | None = None
+    grid: object = None  # the VoxelGrid read for the estimate (grid input), reused by the run
     model_index: int = 0
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))  # the source's matrix_world
     parent: str | None = None
     parent_inverse: np.ndarray = field(default_factory=lambda: np.eye(4))
-    estimate: float = 0.0  # seconds (plan.estimate_seconds; 0 for grids)
+    estimate: float = 0.0  # seconds (plan.estimate_seconds)
     open_edges: int = 0
     warnings: list = field(default_factory=list)
     error: errors.AGNDCError | None = None
@@ -298,7 +299,25 @@ def grid_jobs(paths, settings: Settings) -> list[Job]:
             jobs.extend(_grid_file_jobs(path, name, settings))
         except errors.AGNDCError as exc:
             jobs.append(Job(name=name, grid_path=str(path), error=exc))
+    for job in jobs:
+        if job.error is None:
+            try:
+                _estimate_grid_job(job, settings)
+            except errors.AGNDCError as exc:
+                job.error = exc
     return jobs
+
+
+def _estimate_grid_job(job: Job, settings: Settings) -> None:
+    """Read a grid job's grid (kept for the run) and estimate the run from its size and
+    surface, as for meshes: a long import asks first (``operators.confirm_message``)."""
+    job.grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
+    job.shape = tuple(job.grid.shape)
+    crossings = plan.grid_crossings(job.grid.occupancy)
+    threads = resolve_threads(settings.threads) or os.cpu_count() or 1
+    # no source mesh: no Chamfer distance to report
+    job.estimate = sum(plan.estimate_seconds(method, job.shape, crossings, threads=threads)
+                       for method in settings.methods())
 
 
 def _grid_file_jobs(path: Path, name: str, settings: Settings) -> list[Job]:
@@ -402,7 +421,8 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
     sub = pipeline.subrange
     if job.grid_path is not None:
         progress(0.0, "reading grid")
-        grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
+        grid = job.grid or gridio.load_grid(job.grid_path, model_index=job.model_index)
+        job.grid = None  # the run holds it now; the job does not keep it alive
         check_cancel()
         first = pipeline.remesh(grid, method=settings.method,
                                 progress=sub(progress, 0.0, main_share), **options)

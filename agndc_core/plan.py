@@ -87,7 +87,8 @@ def plan_grid(extent, *, voxel_size: float | None = None, resolution: int | None
         # above 700
         resolution = max(math.ceil(longest / voxel_size * (1 - 1e-6)), 1) + 2 * MARGIN
         if resolution > RESOLUTION_MAX:
-            finest = longest / (RESOLUTION_MAX - 2 * MARGIN)
+            # the finest size within both limits (per side and in total), so the advice works
+            finest = _finest_voxel(extent)
             raise MeshError(f"{source}: a voxel size of {voxel_size:.4g} gives {resolution:,} "
                             f"voxels along its longest side ({longest:.4g}), more than "
                             f"{RESOLUTION_MAX}; use a voxel size of at least {_up(finest)}")

@@ -8,6 +8,7 @@ import time
 from types import SimpleNamespace
 
 import bpy
+import numpy as np
 import pytest
 
 from conftest import WEIGHTS
@@ -228,6 +229,27 @@ def test_estimate_and_confirmation(addon):
     message = operators.confirm_message(jobs)
     assert message.startswith("1 object (Cube 256×256×256): about ") and "Esc cancels" in message
     assert abs(jobs[0].estimate - slow) / slow < 0.2  # the panel and the operator agree
+
+
+def test_grid_imports_estimate_and_ask_first(addon, tmp_path):
+    """A grid file is read when its job is made: its size gives the estimate, and an import
+    estimated above 10 s asks first, as a mesh run does (the grid is read once)."""
+    operators = _operators(addon)
+    remesh = addon.remesh
+    x, y, z = np.meshgrid(*[np.arange(200)] * 3, indexing="ij")
+    big = ((x - 99.5) ** 2 + (y - 99.5) ** 2 + (z - 99.5) ** 2) < 90 ** 2
+    np.save(tmp_path / "big.npy", big)
+    np.save(tmp_path / "small.npy", big[::10, ::10, ::10])
+    settings = remesh.Settings(method="agndc")
+    small = remesh.grid_jobs([tmp_path / "small.npy"], settings)
+    assert small[0].shape == (20, 20, 20) and 0 < small[0].estimate < 10
+    assert operators.confirm_message(small) == ""
+    jobs = remesh.grid_jobs([tmp_path / "big.npy"], settings)
+    assert jobs[0].grid is not None and jobs[0].estimate > 10
+    message = operators.confirm_message(jobs)
+    assert message.startswith("1 grid (big 200×200×200): about ") and "Esc cancels" in message
+    mc = remesh.grid_jobs([tmp_path / "big.npy"], remesh.Settings(method="mc"))
+    assert mc[0].estimate < jobs[0].estimate / 10
 
 
 def test_help_button_opens_the_manifest_website(addon):

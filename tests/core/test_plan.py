@@ -53,8 +53,11 @@ def test_limits_match_voxelize():
 
 def test_too_fine_voxel_size_says_what_works():
     with pytest.raises(MeshError, match=r"Cube: a voxel size of 0\.001 gives 2,002 voxels.*at "
-                                        r"least 0\.00196"):
+                                        r"least 0\.00") as info:
         plan.plan_grid((2, 2, 1), voxel_size=0.001, source="Cube")
+    # 0.00196 would do per side (1,022 voxels) but not in total (1022x1022x512): not advised
+    advised = float(str(info.value).rsplit(" ", 1)[-1])
+    assert advised > 0.00196 and plan.plan_grid((2, 2, 1), voxel_size=advised)
     # a cube at 700 voxels per side is within the resolution limit but over MAX_VOXELS
     with pytest.raises(MeshError, match="more than the 216,000,000") as info:
         plan.plan_grid((1, 1, 1), voxel_size=1 / 700)
@@ -144,3 +147,18 @@ def test_is_planar():
     square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float) @ rotation.T
     assert plan.is_planar(square + 5.0)
     assert not plan.is_planar(np.vstack([square, [[0, 0, 1e-3]] @ rotation.T]))
+
+
+@pytest.mark.parametrize("extent", [(2.0, 2.0, 2.0), (1.0, 0.2, 0.1), (300.0, 120.0, 80.0),
+                                    (0.18, 0.1, 0.07)])
+def test_the_advised_voxel_size_works_in_one_step(extent):
+    """Too fine a voxel size names a size that satisfies both limits (voxels per side and in
+    total): using it plans a grid at once."""
+    import re
+
+    for voxel_size in (min(extent) * 1e-4, max(extent) / 2000):
+        with pytest.raises(MeshError) as caught:
+            plan.plan_grid(extent, voxel_size=voxel_size)
+        advised = float(re.search(r"at least ([0-9.e-]+)", str(caught.value)).group(1))
+        grid = plan.plan_grid(extent, voxel_size=advised)
+        assert grid.voxels <= plan.MAX_VOXELS and grid.resolution <= plan.RESOLUTION_MAX
