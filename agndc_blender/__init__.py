@@ -31,6 +31,9 @@ classes = (
 
 def register():
     for cls in classes:
+        if issubclass(cls, bpy.types.Operator) and cls.__doc__:
+            # the tooltip: the docstring as one line (Blender shows its line breaks and indent)
+            cls.bl_description = " ".join(cls.__doc__.split())
         bpy.utils.register_class(cls)
     bpy.types.Scene.agndc = bpy.props.PointerProperty(type=properties.AGNDC_RemeshSettings)
     for type_name, draw in panels.MENU_HOOKS:

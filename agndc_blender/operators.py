@@ -58,14 +58,15 @@ class RunState:
     def __init__(self):
         self.operator = None
         self.fraction, self.message, self.started = 0.0, "", 0.0
+        self.label = "AGNDC"  # the running method's name, for the status bar
         self.cancelling = False
 
     @property
     def active(self) -> bool:
         return self.operator is not None
 
-    def begin(self, operator):
-        self.operator, self.fraction, self.message = operator, 0.0, "starting"
+    def begin(self, operator, label: str = "AGNDC"):
+        self.operator, self.fraction, self.message, self.label = operator, 0.0, "starting", label
         self.started, self.cancelling = time.perf_counter(), False
 
     def end(self):
@@ -115,7 +116,7 @@ def draw_status(header, context):
     layout = header.layout
     row = layout.row(align=True)
     row.progress(factor=RUN.fraction, type="BAR",
-                 text=f"AGNDC {RUN.fraction:.0%}  {RUN.message}")
+                 text=f"{RUN.label} {RUN.fraction:.0%}  {RUN.message}")
     layout.label(text="Cancelling..." if RUN.cancelling else "Esc: cancel", icon="CANCEL")
 
 
@@ -220,7 +221,7 @@ class _RemeshOperatorMixin:
         wm = context.window_manager
         self._timer = wm.event_timer_add(TIMER_STEP, window=context.window)
         wm.modal_handler_add(self)
-        RUN.begin(self)
+        RUN.begin(self, remesh.SUFFIXES.get(settings.method, "AGNDC"))
         self._redraw(context)
         self._thread.start()
         return {"RUNNING_MODAL"}
@@ -252,7 +253,7 @@ class _RemeshOperatorMixin:
         self._end(context)
         errors = self._remesh.errors
         if self._cancel.is_set() or isinstance(self._error, errors.CancelledError):
-            self.report({"WARNING"}, "AGNDC remesh cancelled: nothing was added")
+            self.report({"WARNING"}, f"{RUN.label} remesh cancelled: nothing was added")
             return {"CANCELLED"}
         if isinstance(self._error, errors.AGNDCError):
             return self.fail(self._error)

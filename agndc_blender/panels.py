@@ -73,17 +73,19 @@ def _draw_preview(layout, context, settings) -> None:
         layout.label(text="Select mesh objects to remesh", icon="INFO")
         return
     box = layout.box().column(align=True)
-    total = 0.0
+    total, runnable = 0.0, 0
     for obj in meshes[:PREVIEW_OBJECTS]:
         shape, seconds, problem = preview(obj, settings, context)
         if problem:
             box.label(text=f"{obj.name}: {problem}", icon="ERROR")
             continue
-        total += seconds
+        total, runnable = total + seconds, runnable + 1
         box.label(text=f"{obj.name}: {' × '.join(map(str, shape))} voxels")
     if len(meshes) > PREVIEW_OBJECTS:
         box.label(text=f"... and {len(meshes) - PREVIEW_OBJECTS} more")
-    box.label(text=f"Estimated time: {format_seconds(total)}", icon="TIME")
+        runnable += len(meshes) - PREVIEW_OBJECTS
+    if runnable:  # no time under objects that cannot run
+        box.label(text=f"Estimated time: {format_seconds(total)}", icon="TIME")
 
 
 def preview(obj, settings, context):

@@ -158,7 +158,8 @@ def summarize(reports: list[Report]) -> tuple[str, str]:
     text = f"{done} remeshed"
     if failed:
         text += f", {len(failed)} failed: " + "; ".join(r.summary() for r in failed)
-    warnings = [w for r in reports for w in r.warnings]
+    # a failed input's warnings (e.g. "remeshed as the solid it encloses") did not come true
+    warnings = [w for r in reports if r.error is None for w in r.warnings]
     if warnings:
         text += " | " + "; ".join(warnings)
     level = "ERROR" if not done else "WARNING" if failed or warnings else "INFO"
@@ -166,10 +167,12 @@ def summarize(reports: list[Report]) -> tuple[str, str]:
 
 
 def _without_name(message: str, name: str) -> str:
-    """A core message without its leading "name: " (the summary names the input itself)."""
-    for prefix in (f"{name}: ", f"'{name}': "):
-        if message.startswith(prefix):
-            return message[len(prefix):]
+    """A core message without its leading "name: " or "file name: " (the summary names the
+    input itself: "pair: pair.vox: ..." says the file twice)."""
+    head, sep, rest = message.partition(": ")
+    token = head.strip("'")
+    if sep and (token == name or ("." in token and name.startswith(token.split(".")[0]))):
+        return rest
     return message
 
 

@@ -111,11 +111,11 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
             tile = AUTO_TILE if padded.size > AUTO_TILE_LIMIT else 0
         with _running(model, report):
             pred = _predict_band(model, padded, band_radius, int(tile), report)
-        report.segment(0.95, 0.95, "AGNDC output")
+        report.segment(0.95, 0.95, "network output")
     pred = _to_numpy(pred)[:shape[0], :shape[1], :shape[2]]
     vertex = np.clip(pred[..., :3], 0.0, 1.0)
     edge_prob = (1.0 / (1.0 + np.exp(-pred[..., 3:]))).astype(np.float32)
-    report(1.0, "AGNDC done")
+    report(1.0, "network done")
     return np.ascontiguousarray(vertex), np.ascontiguousarray(edge_prob)
 
 
@@ -202,7 +202,7 @@ def _predict_band(model, lattice: np.ndarray, radius, tile: int, report):
         out, torus = None, None
         for i, (core, region) in enumerate(plans[s]):
             report.segment(0.95 * done / total, 0.95 * (done + weights[s][i]) / total,
-                           f"AGNDC scale {s}, tile {i + 1}/{len(plans[s])}", weights[s][i])
+                           f"network scale {s}, tile {i + 1}/{len(plans[s])}", weights[s][i])
             sub = None
             if coarser is not None:
                 half = tuple(slice(r.start // 2, r.stop // 2) for r in region)
@@ -298,7 +298,7 @@ class _Reporter:
 
     def check(self) -> None:
         if self.cancel is not None and self.cancel.is_set():
-            raise CancelledError("AGNDC inference cancelled")
+            raise CancelledError("inference cancelled")
 
     def segment(self, lo: float, hi: float, message: str, work: float = 0.0) -> None:
         now = time.perf_counter()

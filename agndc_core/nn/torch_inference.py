@@ -35,7 +35,7 @@ def running(report) -> ExitStack:
 def predict_dense(model, padded, report) -> torch.Tensor:
     """(X, Y, Z, 6) prediction of the plain training forward on the whole lattice (reference;
     slow on a CPU)."""
-    report(0.0, "AGNDC dense")
+    report(0.0, "network (dense)")
     with running(report):
         g = torch.from_numpy(padded)[None].to(next(model.parameters()).device)
         return model(g)[0][0].permute(1, 2, 3, 0)

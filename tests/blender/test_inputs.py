@@ -148,7 +148,7 @@ def test_vox_with_several_models(addon, tmp_path, capfd):
     assert grid(filepath=str(path), method="mc", model_index=1) == {"FINISHED"}
     v, _ = _arrays(addon, bpy.data.objects["two_model1_MC"])  # model 1: the 10 x 4 x 4 block
     assert np.ptp(v[:, 0]) > 2 * np.ptp(v[:, 1])
-    with pytest.raises(RuntimeError, match="two.vox: no model 5; the file holds 2"):
+    with pytest.raises(RuntimeError, match="two: no model 5; the file holds 2"):
         grid(filepath=str(path), method="mc", model_index=5)
     count = len(bpy.data.objects)
     assert grid(filepath=str(path), method="mc", vox_models="ALL") == {"FINISHED"}

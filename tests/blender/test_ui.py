@@ -74,6 +74,7 @@ class RecordingLayout:
 
     def progress(self, factor=0.0, type="BAR", text=""):
         assert 0.0 <= factor <= 1.0 and type == "BAR"
+        self.log.append(("progress_text", text))
         self.log.append(("progress", factor))
 
 
@@ -198,14 +199,51 @@ def test_sidebar_shows_the_progress_of_a_run(addon):
     operators, panels = _operators(addon), importlib.import_module(f"{addon.module}.panels")
     operators.RUN.begin(object())
     try:
-        operators.RUN.fraction, operators.RUN.message = 0.42, "Part: AGNDC scale 0"
+        operators.RUN.fraction, operators.RUN.message = 0.42, "Part: network scale 0"
         log = []
         panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)),
                                            bpy.context)
-        assert ("progress", 0.42) in log and ("label", "Part: AGNDC scale 0") in log
+        assert ("progress", 0.42) in log and ("label", "Part: network scale 0") in log
         assert not bpy.ops.object.agndc_remesh.poll()
     finally:
         operators.RUN.end()
+
+
+def test_operator_tooltips_are_one_line(addon):
+    for operator in (bpy.ops.object.agndc_remesh, bpy.ops.import_mesh.agndc_grid):
+        description = operator.get_rna_type().description
+        assert description and "\n" not in description and "  " not in description
+
+
+def test_no_time_estimate_for_an_object_that_cannot_run(addon):
+    panels = importlib.import_module(f"{addon.module}.panels")
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    settings = bpy.context.scene.agndc
+    settings.size_mode, settings.voxel_size = "VOXEL_SIZE", 1e-4  # far too fine
+    try:
+        log = []
+        panels._draw_preview(RecordingLayout(log), bpy.context, settings)
+        labels = [text for kind, text in log if kind == "label"]
+        assert any("at least" in text for text in labels)
+        assert not any(text.startswith("Estimated time") for text in labels)
+    finally:
+        settings.property_unset("voxel_size")
+        settings.property_unset("size_mode")
+
+
+def test_status_bar_names_the_running_method(addon):
+    """A Sharp or MC run is not announced as AGNDC."""
+    operators = _operators(addon)
+    for label in ("Sharp", "MC", "AGNDC"):
+        operators.RUN.begin(object(), label)
+        try:
+            operators.RUN.fraction, operators.RUN.message = 0.5, "Part: dual contouring"
+            log = []
+            operators.draw_status(SimpleNamespace(layout=RecordingLayout(log)), bpy.context)
+            texts = [text for kind, text in log if kind == "progress_text"]
+            assert texts == [f"{label} 50%  Part: dual contouring"]
+        finally:
+            operators.RUN.end()
 
 
 def test_estimate_and_confirmation(addon):
@@ -286,3 +324,16 @@ def test_grid_preview_has_no_numbers_for_non_meshes(addon):
     log = []
     panels._draw_preview(RecordingLayout(log), bpy.context, bpy.context.scene.agndc)
     assert log == [("label", "Select mesh objects to remesh")]
+
+
+def test_run_summary_names_each_input_once_and_no_warning_of_a_failure(addon):
+    remesh = addon.remesh
+    failed = remesh.Report(source="pair", made=[], error="pair.vox: no model 3; the file holds 2",
+                           warnings=["pair is not closed: remeshed as the solid it encloses"])
+    level, text = remesh.summarize([failed])
+    assert level == "ERROR"
+    assert text == "0 remeshed, 1 failed: pair: no model 3; the file holds 2"
+    quoted = remesh.Report(source="Plane", made=[], error="'Plane': open surface")
+    assert remesh.summarize([quoted])[1] == "0 remeshed, 1 failed: Plane: open surface"
+    other = remesh.Report(source="Cube", made=[], error="Sphere.npy: not found")
+    assert "Cube: Sphere.npy: not found" in remesh.summarize([other])[1]  # another name stays
