@@ -60,7 +60,7 @@ TILE_PROGRESS_CAP = 0.97
 
 def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = None,
                     progress=None, cancel=None, device=None, band_radius: int | None = None,
-                    canonical: bool = True):
+                    canonical: bool = True, edges: bool = True):
     """Run the AGNDC cascade on a padded dual-contouring lattice (grid.py convention).
 
     Args:
@@ -78,6 +78,9 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
         canonical: run the network on ``trained_window`` of the lattice (the shape with the
             empty margins voxelising gives), so the result does not depend on how much empty
             space surrounds the shape; False runs it on the lattice as given (diagnostics).
+        edges: also return the finest edge probabilities; False (what contouring a binary grid
+            needs: its edges come from the grid) returns None for them and, in the numpy
+            runtime, keeps only the vertex channels of the finest scale (half its memory).
 
     Returns:
         vertex: (Dx, Dy, Dz, 3) float32 in [0, 1], the dual vertex of the cell at each point as
@@ -90,7 +93,8 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     window = trained_window(lattice) if canonical else None
     if window is not None:
         return _predict_window(model, lattice, window, mode=mode, tile=tile, progress=progress,
-                               cancel=cancel, device=device, band_radius=band_radius)
+                               cancel=cancel, device=device, band_radius=band_radius,
+                               edges=edges)
     numpy_net = getattr(model, "backend", None) == "numpy"
     if numpy_net and (mode == "dense" or device not in (None, "cpu")):
         raise AGNDCError("the numpy runtime evaluates the band on the CPU only; load the "
@@ -109,14 +113,19 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     else:
         if tile is None:
             tile = AUTO_TILE if padded.size > AUTO_TILE_LIMIT else 0
+        channels = 3 if numpy_net and not edges else 6
         with _running(model, report):
-            pred = _predict_band(model, padded, band_radius, int(tile), report)
+            pred = _predict_band(model, padded, band_radius, int(tile), report, channels)
         report.segment(0.95, 0.95, "network output")
     pred = _to_numpy(pred)[:shape[0], :shape[1], :shape[2]]
-    vertex = np.clip(pred[..., :3], 0.0, 1.0)
-    edge_prob = (1.0 / (1.0 + np.exp(-pred[..., 3:]))).astype(np.float32)
+    vertex = np.ascontiguousarray(pred[..., :3])
+    np.clip(vertex, 0.0, 1.0, out=vertex)
+    edge_prob = None
+    if edges:
+        edge_prob = np.ascontiguousarray((1.0 / (1.0 + np.exp(-pred[..., 3:]))),
+                                         dtype=np.float32)
     report(1.0, "network done")
-    return np.ascontiguousarray(vertex), np.ascontiguousarray(edge_prob)
+    return vertex, edge_prob
 
 
 def _running(model, report):
@@ -176,16 +185,20 @@ def _predict_window(model, lattice, window, **options):
     start, sub = window
     vertex_sub, edge_sub = predict_lattice(model, sub, canonical=False, **options)
     # points outside the window have no crossed edge nearby: their values are never used
-    vertex = np.full(lattice.shape + (3,), 0.5, dtype=vertex_sub.dtype)
-    edge_prob = np.zeros(lattice.shape + (3,), dtype=edge_sub.dtype)
     dst = tuple(slice(max(a, 0), min(a + n, m)) for a, n, m in zip(start, sub.shape, lattice.shape))
     src = tuple(slice(d.start - a, d.stop - a) for d, a in zip(dst, start))
-    vertex[dst], edge_prob[dst] = vertex_sub[src], edge_sub[src]
+    vertex = np.full(lattice.shape + (3,), 0.5, dtype=vertex_sub.dtype)
+    vertex[dst] = vertex_sub[src]
+    edge_prob = None
+    if edge_sub is not None:
+        edge_prob = np.zeros(lattice.shape + (3,), dtype=edge_sub.dtype)
+        edge_prob[dst] = edge_sub[src]
     return vertex, edge_prob
 
 
-def _predict_band(model, lattice: np.ndarray, radius, tile: int, report):
-    """(X, Y, Z, 6) scale-0 prediction by band evaluation, tiled scale by scale."""
+def _predict_band(model, lattice: np.ndarray, radius, tile: int, report, channels: int = 6):
+    """(X, Y, Z, channels) scale-0 prediction by band evaluation, tiled scale by scale (the
+    coarser scales keep all 6 channels: the next scale reads their edge logits)."""
     levels, cfg = model.levels, model.config
     grids = occupancy_pyramid(lattice, levels)
     periods = model.torus_periods
@@ -209,10 +222,11 @@ def _predict_band(model, lattice: np.ndarray, radius, tile: int, report):
                 sub = (coarser[0][half], coarser[1])
             rows, ops = model.band_scale(s, grid[region], sub, radius,
                                          out_radius=1 if s == 0 else None)
-            dense = ops.to_dense(rows)
+            kept = channels if s == 0 else 6
+            dense = ops.to_dense(rows[:, :kept])
             if out is None:
-                out = (np.empty((*grid.shape, 6), dtype=np.float32) if isinstance(dense, np.ndarray)
-                       else dense.new_empty(*grid.shape, 6))
+                out = (np.empty((*grid.shape, kept), dtype=np.float32)
+                       if isinstance(dense, np.ndarray) else dense.new_empty(*grid.shape, kept))
             local = tuple(slice(c.start - r.start, c.stop - r.start) for c, r in zip(core, region))
             out[core] = dense[local]
             torus = rows[:ops.torus]

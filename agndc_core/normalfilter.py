@@ -88,6 +88,22 @@ def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a)
 
 
+#: face pairs per chunk of the pairwise distances
+PAIR_CHUNK = 1 << 20
+
+
+def _pairwise(function, n: int) -> np.ndarray:
+    """(n,) float64: ``function(a, b)`` evaluated on consecutive chunks of the pairs."""
+    out = np.empty(n, dtype=np.float64)
+    for a in range(0, n, PAIR_CHUNK):
+        out[a:a + PAIR_CHUNK] = function(a, min(a + PAIR_CHUNK, n))
+    return out
+
+
+def _sq_norm(u: np.ndarray) -> np.ndarray:
+    return _dot(u, u)
+
+
 def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Row-wise dot products of two (N, 3) arrays: (N,)."""
     return np.einsum("ij,ij->i", u, v)
@@ -118,13 +134,22 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
     n_faces = len(normals)
     if len(pairs) == 0:
         return normals
-    offset = centroids[i] - centroids[j]  # (P, 3)
-    distance_sq = _dot(offset, offset)  # (P,)
+    # pairs come sorted by i (face_neighbours): the weight matrix's rows, built once; each pass
+    # only refills its values. Pair quantities are computed in chunks (10^7 pairs at 256³:
+    # a full (P, 3) float64 temporary is 240 MB)
+    order_ok = bool(np.all(i[1:] >= i[:-1]))
+    if not order_ok:
+        sort = np.lexsort((j, i))
+        i, j = i[sort], j[sort]
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=n_faces))])
+    distance_sq = _pairwise(lambda a, b: _sq_norm(centroids[i[a:b]] - centroids[j[a:b]]),
+                            len(i))
     spatial = areas[j] * np.exp(-distance_sq / (2.0 * np.mean(distance_sq)))  # (P,)
     for _ in range(params.normal_iterations):
-        difference = normals[i] - normals[j]  # (P, 3)
-        agreement = np.exp(-_dot(difference, difference) / (2.0 * params.sigma_normal ** 2))
-        weights = sp.csr_matrix((spatial * agreement, (i, j)), shape=(n_faces, n_faces))
+        difference_sq = _pairwise(lambda a, b, n=normals: _sq_norm(n[i[a:b]] - n[j[a:b]]),
+                                  len(i))
+        agreement = np.exp(-difference_sq / (2.0 * params.sigma_normal ** 2))
+        weights = sp.csr_matrix((spatial * agreement, j, indptr), shape=(n_faces, n_faces))
         summed = areas[:, None] * normals + weights @ normals  # (F, 3)
         length = np.sqrt(_dot(summed, summed))[:, None]
         normals = np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)

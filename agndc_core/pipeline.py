@@ -354,8 +354,10 @@ def _predict(method, lattice, labels, checkpoint, threads, device, tile, progres
 
     model = load_model(checkpoint or _default_checkpoint(method), device)
     set_inference_threads(threads, device)
+    # the edges of a binary grid are its own: the network's vertices are all contouring needs
     vertex, _ = predict_lattice(model, lattice, device=None if device == "cpu" else device,
-                                tile=tile, progress=progress, cancel=cancel, canonical=reframe)
+                                tile=tile, progress=progress, cancel=cancel, canonical=reframe,
+                                edges=False)
     return vertex
 
 

@@ -384,7 +384,11 @@ def child_prediction(p: np.ndarray, mask: np.ndarray, child: np.ndarray) -> np.n
 
 
 def sigmoid(x: np.ndarray) -> np.ndarray:
-    return (1.0 / (1.0 + np.exp(-x))).astype(np.float32)
+    """Logistic function into a new float32 array (one temporary, not four)."""
+    out = np.negative(x, dtype=np.float32)
+    np.exp(out, out=out)
+    out += 1.0
+    return np.reciprocal(out, out=out)
 
 
 def grid_coords(shape) -> np.ndarray:

@@ -109,13 +109,29 @@ class Network:
                                        self.tensors[name + ".bias"])
         return self.tensors[key]
 
+    def offset_rows(self, name: str, axis: int) -> Linear:
+        """The rows of DSConv's offset layer that drive the snake along ``axis`` (its outputs
+        are (3 snakes, 2 lateral axes, K taps), snake-major)."""
+        key = ("offset", name, axis)
+        if key not in self.tensors:
+            weight, bias = self.tensors[name + ".weight"], self.tensors[name + ".bias"]
+            n = weight.shape[0] // 3
+            self.tensors[key] = Linear(weight[axis * n:(axis + 1) * n],
+                                       bias[axis * n:(axis + 1) * n])
+        return self.tensors[key]
+
     def has(self, name: str) -> bool:
         return name + ".weight" in self.tensors or name + ".bias_table" in self.tensors
 
     # ------------------------------------------------------------------ layers
     def act(self, x: np.ndarray) -> np.ndarray:
-        """LeakyReLU in place."""
-        np.maximum(x, x * self.slope, out=x)
+        """LeakyReLU in place, in chunks (no full-size temporary)."""
+
+        def work(a, b):
+            part = x[a:b]
+            np.maximum(part, part * self.slope, out=part)
+
+        for_chunks(x.shape[0], LINEAR_CHUNK_ROWS, work)
         return x
 
     def _tick(self):
@@ -161,14 +177,15 @@ class Network:
         cfg = self.config
         k = cfg.snake_kernel
         plain = self.band_conv(ops, x, prefix + ".plain", radius)
-        # (R, 3, 2, K) cumulative lateral offsets of each snake's taps
-        drift = self.linear(prefix + ".offset")(plain).reshape(-1, 3, 2, k)
-        offsets = snake_offsets(drift, cfg.snake_scope)
         branches = [plain]
         for axis in range(3):
             self._tick()
+            # (R, 2, K) cumulative lateral offsets of this snake's taps: one axis at a time,
+            # a third of the memory of all three (40 bytes a row each)
+            drift = self.offset_rows(prefix + ".offset", axis)(plain).reshape(-1, 2, k)
+            offsets = snake_offsets(drift, cfg.snake_scope)
             taps = self.linear(f"{prefix}.taps.{axis}")(x)
-            branches.append(self.act(ops.snake(taps, offsets[:, axis], axis, radius)))
+            branches.append(self.act(ops.snake(taps, offsets, axis, radius)))
         return self.act(self.linear(prefix + ".fuse")(np.concatenate(branches, -1)))
 
     def lwsa(self, ops: Band, f, prefix: str, radius: int):
@@ -220,14 +237,28 @@ class Network:
         r2 = min(ops.radius, radius + 3)
         u = ops.upsample_prediction(p_coarser, min(ops.radius, radius + 4))
         f_m = self.band_conv(ops, u, prefix + ".embed", r2)
+        del u  # large row arrays are dropped as soon as they are used up (peak memory)
         both = np.concatenate([ops.crop(f, r2), f_m], -1)
         pooled = ops.down(self.linear(prefix + ".att1")(both), min(ops.half.radius, (r1 + 1) // 2))
         hidden = ops.up(pooled, r1)
-        gate = sigmoid(self.linear(prefix + ".att2")(np.maximum(hidden, hidden * self.slope)))
-        reduced = self.act(self.linear(prefix + ".reduce")(ops.crop(both, r1) * gate))
-        spatial = sigmoid(self.band_conv(ops, f, prefix + ".spatial_f", r1, act=False)
-                          + self.band_conv(ops, f_m, prefix + ".spatial_m", r1, act=False))
-        return self.band_conv(ops, reduced * spatial, prefix + ".out", radius, act=False)
+        att2, reduce = self.linear(prefix + ".att2"), self.linear(prefix + ".reduce")
+        reduced = np.empty((hidden.shape[0], reduce.weight_t.shape[1]), dtype=np.float32)
+
+        def gated(a, b):  # chunks: the (R, 2w) gate is never held for every row at once
+            h = hidden[a:b]
+            gate = sigmoid(np.maximum(h, h * self.slope) @ att2.weight_t + att2.bias)
+            gate *= both[a:b]
+            out = gate @ reduce.weight_t
+            out += reduce.bias
+            reduced[a:b] = np.maximum(out, out * self.slope)
+
+        for_chunks(hidden.shape[0], LINEAR_CHUNK_ROWS, gated)
+        both = hidden = pooled = None  # used up: dropped before the next large arrays
+        spatial = self.band_conv(ops, f, prefix + ".spatial_f", r1, act=False)
+        spatial += self.band_conv(ops, f_m, prefix + ".spatial_m", r1, act=False)
+        del f_m
+        reduced *= sigmoid(spatial)
+        return self.band_conv(ops, reduced, prefix + ".out", radius, act=False)
 
     def crpm(self, ops: Band, w, p_iso, prefix: str, radius: int):
         """Contour refinement (``nn/crpm.py``) -> P_s (R, 6)."""
@@ -282,6 +313,7 @@ class Network:
             w = self.dffm(ops, f, p_rows, prefix + ".dffm", r_w)
         else:
             w = ops.upsample_prediction(p_rows, r_w)
+        del f, p_rows  # CRPM reads W_s and P'_s only
         if use_crpm:
             return self.crpm(ops, w, p_iso, prefix + ".crpm", out_radius), ops
         return ops.crop(p_iso, out_radius) + ops.crop(w, out_radius), ops

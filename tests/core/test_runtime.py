@@ -144,3 +144,14 @@ def test_automatic_threads_come_back_after_a_one_thread_run():
         assert get_threads() == default_threads()
     finally:
         set_threads(before)
+
+
+def test_vertices_alone_equal_the_full_prediction():
+    """edges=False (what the pipeline asks for) keeps the vertex channels only: the same
+    vertices, no edge probabilities."""
+    network = load_network(default_checkpoint_path("agndc"))
+    lattice = np.pad(cad_lattice(32, 8), ((3, 0), (0, 2), (1, 1)))
+    vertex, edge = predict_lattice(network, lattice)
+    alone, none = predict_lattice(network, lattice, edges=False)
+    assert none is None and edge is not None
+    np.testing.assert_array_equal(alone, vertex)
