@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The background CPU lineage: the best recipe (the curriculum of docs/experiments/
+# binary-targets-curriculum.md) trained on one thread at the lowest priority, resumable at any
+# moment. Run it again to go on where it stopped (each stage resumes bit-exactly from its state
+# shards; a finished stage is skipped):
+#   nohup nice -n 19 bash scripts/cpu_lineage.sh [DATA] [RUNS] > lineage.log 2>&1 &
+# Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100, +100);
+# stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets. Pause it for a
+# benchmark with kill -STOP / kill -CONT on the `agndc train` process.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+data=${1:-/work/data/v2_train}
+runs=${2:-/work/runs}
+export OMP_NUM_THREADS=1
+if [[ ! -f "$data/.done" ]]; then
+    .venv/bin/agndc train-data -o "$data" -n 900 --workers 1 && touch "$data/.done"
+fi
+model='{"width": 16, "snake_kernel": 5, "band_radius": 4}'
+common=(--data "$data" --batch 4 --quadric-floor 1.0 --outside-crops --threads 1 --model "$model")
+
+stage() {  # stage NAME ARGS...: run or resume one stage; skip it once final.safetensors exists
+    local name=$1; shift
+    [[ -f "$runs/$name/final.safetensors" ]] && return 0
+    local resume=()
+    [[ -f "$runs/$name/run.json" ]] && resume=(--resume)
+    .venv/bin/agndc train -o "$runs/$name" "${common[@]}" "$@" "${resume[@]}"
+}
+
+stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets --val-steps 3000
+stage dt_agndc16_cont --init "$runs/bt_agndc16_long/step-003000.safetensors" --lr 5e-4 --seed 6 \
+    --steps 2400,0,0
