@@ -43,7 +43,13 @@ from .common import (
     lateral_axes,
     snake_corners,
 )
-from .layout import half_band, snake_margin, surface_distance, torus_periods  # noqa: F401
+from .layout import (  # noqa: F401  (re-exported)
+    BandRows,
+    half_band,
+    snake_margin,
+    surface_distance,
+    torus_periods,
+)
 
 #: floats per gather buffer (32 MB): bounds memory, keeps the matmul operands cache-friendly
 CHUNK_FLOATS = 1 << 23
@@ -55,7 +61,7 @@ PROJECT_FIRST_MAX = 2
 MIN_MATMUL_COLUMNS = 16
 
 
-class BandOps:
+class BandOps(BandRows):
     """Spatial ops over the band rows of one lattice (see module docstring).
 
     Args:
@@ -106,16 +112,6 @@ class BandOps:
         return cls(torch.zeros(tuple(shape), dtype=torch.bool, device=device), ones, 1, period)
 
     # ------------------------------------------------------------------ rows and lookups
-    def radius_of(self, x: torch.Tensor) -> int:
-        try:
-            return self._radius_of_rows[x.shape[0]]
-        except KeyError:
-            raise ValueError(f"{x.shape[0]} rows is no band of this lattice "
-                             f"(row counts {self.counts})") from None
-
-    def rows(self, radius: int) -> int:
-        return self.counts[min(radius, self.radius)]
-
     def volume(self, radius: int) -> torch.Tensor:
         """(X + 2m, Y + 2m, Z + 2m) int32 flattened: the row each point reads from a source of
         ``radius``; the margin replicates the border (positions outside read the nearest)."""
@@ -177,9 +173,6 @@ class BandOps:
     def input(self, g=None) -> torch.Tensor:
         """(T, 1) occupancy rows of radius 0: the torus only, every band point reads its type."""
         return self.torus_type.to(torch.float32)[:, None]
-
-    def crop(self, x: torch.Tensor, radius: int) -> torch.Tensor:
-        return x[:self.rows(radius)]
 
     def resample(self, x: torch.Tensor, radius: int) -> torch.Tensor:
         """Rows of ``radius`` from a tensor of any radius (a crop, or far rows appended)."""

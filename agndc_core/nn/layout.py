@@ -27,6 +27,30 @@ CELL_EDGE_CORNERS = tuple(
 SNAKE_CORNERS = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], dtype=np.int64)
 
 
+class BandRows:
+    """The row bookkeeping both runtimes' band classes share (``Band``, ``BandOps``): rows
+    ``[0, T)`` are the torus, then the band points nearest first, so a band of smaller radius is
+    a prefix. Subclasses set ``radius``, ``counts`` (rows of each radius 0..radius) and
+    ``_radius_of_rows`` (row count -> radius)."""
+
+    radius: int
+    counts: list
+
+    def radius_of(self, x) -> int:
+        """The radius a row tensor was computed on, from its row count."""
+        try:
+            return self._radius_of_rows[x.shape[0]]
+        except KeyError:
+            raise ValueError(f"{x.shape[0]} rows is no band of this lattice "
+                             f"(row counts {self.counts})") from None
+
+    def rows(self, radius: int) -> int:
+        return self.counts[min(radius, self.radius)]
+
+    def crop(self, x, radius: int):
+        return x[:self.rows(radius)]
+
+
 def cube_offsets(k: int) -> np.ndarray:
     """(k^3, 3) int64 neighbour offsets of a k x k x k kernel, in ``nn.Conv3d`` weight order."""
     r = range(-(k // 2), k // 2 + 1)

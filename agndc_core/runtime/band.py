@@ -18,6 +18,7 @@ from ..nn.layout import (
     CELL_CORNERS,
     CELL_EDGE_CORNERS,
     SNAKE_CORNERS,
+    BandRows,
     cube_offsets,
     half_band,
     lateral_axes,
@@ -38,7 +39,7 @@ SNAKE_CHUNK_ROWS = 8192
 PROJECT_FIRST_MAX = 2
 
 
-class Band:
+class Band(BandRows):
     """Index tables of one lattice's band (see ``nn/band_ops.BandOps`` for the definitions).
 
     Args:
@@ -85,16 +86,6 @@ class Band:
         return cls(np.zeros(shape, dtype=bool), np.ones(shape, dtype=np.int32), 1, period)
 
     # ------------------------------------------------------------------ rows and lookups
-    def radius_of(self, x: np.ndarray) -> int:
-        try:
-            return self._radius_of_rows[x.shape[0]]
-        except KeyError:
-            raise ValueError(f"{x.shape[0]} rows is no band of this lattice "
-                             f"(row counts {self.counts})") from None
-
-    def rows(self, radius: int) -> int:
-        return self.counts[min(radius, self.radius)]
-
     def volume(self, radius: int) -> np.ndarray:
         """Flat int32 padded volume: the row each point reads from a source of ``radius``;
         the margin replicates the border (positions outside read the nearest point)."""
@@ -155,9 +146,6 @@ class Band:
     def input(self) -> np.ndarray:
         """(T, 1) occupancy rows of radius 0: the torus only, every band point reads its type."""
         return self.torus_type.astype(np.float32)[:, None]
-
-    def crop(self, x: np.ndarray, radius: int) -> np.ndarray:
-        return x[:self.rows(radius)]
 
     def resample(self, x: np.ndarray, radius: int) -> np.ndarray:
         """Rows of ``radius`` from rows of any radius (a crop, or far rows appended)."""
