@@ -49,8 +49,10 @@ OPERATOR = {"options": {"SKIP_SAVE"}}
 
 # Shared definitions, so the PropertyGroup and the operators cannot drift apart.
 def size_mode_property(**extra):
+    # Resolution by default: it adapts to every object (a part modelled in millimetres and a
+    # 0.18-unit model both get 64 voxels on their longest side); a voxel size is the user's choice
     return EnumProperty(name="Size", description="How the grid size is chosen",
-                        items=SIZE_MODE_ITEMS, default="VOXEL_SIZE", **extra)
+                        items=SIZE_MODE_ITEMS, default="RESOLUTION", **extra)
 
 
 def voxel_size_property(**extra):

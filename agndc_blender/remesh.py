@@ -39,6 +39,8 @@ from ._core import methods as registry
 #: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
 #: object-name suffix per method
+#: fewer voxels than this along an object's longest side earn a warning (a blob, not a shape)
+COARSE_VOXELS = 16
 #: object-name suffix of each of the add-on's methods (the registry's labels)
 SUFFIXES = {name: registry.BY_NAME[name].label for name in registry.BLENDER_METHODS}
 #: surface samples per mesh for the Chamfer distance in the report (the paper's metric, fewer
@@ -244,6 +246,12 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
     if obj.parent is not None:
         job.parent = obj.parent.name
         job.parent_inverse = np.array(obj.matrix_parent_inverse, dtype=np.float64)
+    voxels = max(grid.shape) - 2 * plan.MARGIN
+    if voxels < COARSE_VOXELS:
+        job.warnings.append(f"{name} gets only {voxels} voxels along its longest side: its "
+                            f"details are lost (a voxel size of at most "
+                            f"{grid.voxel_size * voxels / COARSE_VOXELS:.3g} gives "
+                            f"{COARSE_VOXELS}; or use Resolution)")
     job.open_edges = plan.open_edge_count(vertices, faces)
     if job.open_edges and plan.is_planar(used):
         raise _open_surface_error(name)

@@ -110,6 +110,7 @@ def test_a_later_call_follows_the_sidebar_not_the_last_call(addon):
     bpy.ops.object.select_all(action="DESELECT")
     bpy.data.objects["Cube"].select_set(True)
     bpy.context.scene.agndc.method = "sharp"
+    bpy.context.scene.agndc.size_mode = "VOXEL_SIZE"
     bpy.context.scene.agndc.voxel_size = 0.5
     assert _run() == {"FINISHED"}
     result = bpy.data.objects["Cube_Sharp"]

@@ -183,12 +183,12 @@ def test_draw_functions(addon):
     for _, draw in panels.MENU_HOOKS:
         draw(fake, bpy.context)
     props = [name for kind, name in log if kind == "prop"]
-    assert props == ["method", "normal_filter", "size_mode", "voxel_size", "use_modifiers",
+    assert props == ["method", "normal_filter", "size_mode", "resolution", "use_modifiers",
                      "output", "compare_mc", "smooth", "threads"]
     labels = [text for kind, text in log if kind == "label"]
     (grid,) = [re.fullmatch(r"Part: (\d+) × (\d+) × (\d+) voxels", t) for t in labels
                if t.startswith("Part: ")]
-    assert max(map(int, grid.groups())) == 42  # 2 units at the default 0.05 + 2 margins
+    assert max(map(int, grid.groups())) == 64  # the default: 64 voxels on the longest side
     assert any(text.startswith("Estimated time: ") for text in labels)
     operators = [name for kind, name in log if kind == "operator"]
     assert operators.count("object.agndc_remesh") == 3  # sidebar, Object Data, Object menu
@@ -337,3 +337,23 @@ def test_run_summary_names_each_input_once_and_no_warning_of_a_failure(addon):
     assert remesh.summarize([quoted])[1] == "0 remeshed, 1 failed: Plane: open surface"
     other = remesh.Report(source="Cube", made=[], error="Sphere.npy: not found")
     assert "Cube: Sphere.npy: not found" in remesh.summarize([other])[1]  # another name stays
+
+
+@pytest.mark.parametrize("size", [200.0, 0.18])
+def test_the_default_size_fits_millimetres_and_tiny_models(addon, size):
+    """By default every object gets 64 voxels on its longest side, whatever its units."""
+    remesh = addon.remesh
+    bpy.ops.mesh.primitive_cube_add(size=size)
+    settings = bpy.context.scene.agndc
+    assert settings.size_mode == "RESOLUTION"
+    (job,) = remesh.mesh_jobs([bpy.context.object], remesh.Settings(method="mc"))
+    assert job.error is None and max(job.shape) == 64 and not job.warnings
+
+
+def test_a_coarse_grid_warns(addon):
+    remesh = addon.remesh
+    bpy.ops.mesh.primitive_cube_add(size=0.18)
+    (job,) = remesh.mesh_jobs([bpy.context.object], remesh.Settings(method="mc",
+                                                                     voxel_size=0.05))
+    assert job.error is None and max(job.shape) < 16
+    assert any("voxels along its longest side" in w and "at most" in w for w in job.warnings)
