@@ -120,8 +120,9 @@ def preview(obj, settings, context):
         if settings.compare_mc and settings.method != "mc" and settings.output != "REPLACE":
             methods.append("mc")
         threads = resolve_threads(settings.threads) or os.cpu_count() or 1
-        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1,
-                                            threads=threads) for m in methods)
+        # a distance per result plus the source's own (the operator's sampling noise)
+        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1 + (k == 0),
+                                            threads=threads) for k, m in enumerate(methods))
         result = (grid.shape, seconds, "")
     except errors.AGNDCError as exc:
         result = ((), 0.0, str(exc).removeprefix(f"{obj.name}: "))

@@ -91,6 +91,9 @@ class Output:
     faces: np.ndarray  # (F, 3) int64
     seconds: float
     cd: float | None = None  # Chamfer distance to the source (metrics.evaluate, raw)
+    # the same measure of the source against itself (independent samples): differences below
+    # twice this are sampling noise, not the method
+    cd_noise: float | None = None
     materials: np.ndarray | None = None  # (F,) int32 material slot per face
 
 
@@ -129,6 +132,7 @@ class Made:
     faces: int
     seconds: float
     cd: float | None
+    cd_noise: float | None = None
 
 
 @dataclass
@@ -146,7 +150,10 @@ class Report:
         parts = []
         for item in self.made:
             text = f"{SUFFIXES[item.method]} {item.faces:,} faces in {item.seconds:.2f} s"
-            if item.cd is not None:
+            if item.cd is not None and item.cd_noise is not None \
+                    and item.cd < 2 * item.cd_noise:
+                text += f", CD within sampling noise (< {2 * item.cd_noise * 1e5:.2f}e-5)"
+            elif item.cd is not None:
                 text += f", CD {item.cd * 1e5:.2f}e-5"
             parts.append(text)
         return f"{self.source}: " + "; ".join(parts)
@@ -260,9 +267,12 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
                             f"the solid it encloses; {OPEN_MESH_HINT}")
     crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
     threads = resolve_threads(settings.threads) or os.cpu_count() or 1
-    job.estimate = sum(plan.estimate_seconds(method, grid.shape, crossings,
-                                             distances=int(settings.distance), threads=threads)
-                       for method in settings.methods())
+    # one distance per result, and one of the source to itself (the sampling noise)
+    distances = [int(settings.distance)] * len(settings.methods())
+    distances[0] += int(settings.distance)
+    job.estimate = sum(plan.estimate_seconds(method, grid.shape, crossings, distances=d,
+                                             threads=threads)
+                       for method, d in zip(settings.methods(), distances))
     return job
 
 
@@ -452,12 +462,18 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         results.append(pipeline.remesh(first.grid, method="mc", cancel=cancel,
                                        progress=sub(progress, main_share, 0.9)))
     outputs = [Output(r.method, r.vertices, r.faces, r.seconds) for r in results]
+    noise = None
+    if settings.distance and job.vertices is not None:
+        progress(0.9, "sampling noise of the distance")
+        noise = float(metrics.evaluate(job.vertices, job.faces, job.vertices, job.faces,
+                                       n_samples=DISTANCE_SAMPLES, seed=1)["cd"])
     for output in outputs:
         check_cancel()
         if settings.distance and job.vertices is not None:
             progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
             output.cd = float(metrics.evaluate(output.vertices, output.faces, job.vertices,
                                                job.faces, n_samples=DISTANCE_SAMPLES)["cd"])
+            output.cd_noise = noise
         if job.face_materials is not None and len(output.faces):
             centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)
             output.materials = plan.nearest_face_values(job.vertices, job.faces,
@@ -564,7 +580,7 @@ def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupi
         source.hide_render = True
         if source.name in bpy.context.view_layer.objects:
             source.hide_set(True)
-    return Made(obj, out.method, len(mesh.polygons), out.seconds, out.cd)
+    return Made(obj, out.method, len(mesh.polygons), out.seconds, out.cd, out.cd_noise)
 
 
 def _placement(job: Job, k: int, out: Output, occupied: list, in_place: bool) -> np.ndarray:

@@ -357,3 +357,14 @@ def test_a_coarse_grid_warns(addon):
                                                                      voxel_size=0.05))
     assert job.error is None and max(job.shape) < 16
     assert any("voxels along its longest side" in w and "at most" in w for w in job.warnings)
+
+
+def test_a_distance_within_sampling_noise_is_not_given_as_a_number(addon):
+    """The report's Chamfer distance is compared with the source against itself (independent
+    samples): below twice that it is noise, and the report says so instead of a number."""
+    remesh = addon.remesh
+    close = remesh.Report(source="Part", made=[remesh.Made(None, "agndc", 100, 1.0, 5.4e-5,
+                                                           5.2e-5)])
+    assert "CD within sampling noise (< 10.40e-5)" in close.summary()
+    far = remesh.Report(source="Part", made=[remesh.Made(None, "mc", 100, 1.0, 20e-5, 5.2e-5)])
+    assert "CD 20.00e-5" in far.summary()
