@@ -90,16 +90,21 @@ def _draw_preview(layout, context, settings) -> None:
 
 def preview(obj, settings, context):
     """(grid shape, estimated seconds, problem text or "") of remeshing ``obj`` now; cached
-    per object, mesh size, transform and settings, so redraws stay cheap."""
+    per object, mesh size, per-axis scale and settings, so redraws stay cheap. Moving or
+    rotating the object changes neither (the grid follows the object's own axes), so dragging
+    it around recomputes nothing."""
     from ._core import errors, plan
     from .remesh import frame_of, resolve_threads
 
     evaluated = obj.evaluated_get(context.evaluated_depsgraph_get()) \
         if settings.use_modifiers else obj
     mesh = evaluated.data
+    # per-axis scale to 6 digits: a rotation's float32 noise must not count as a new scale
+    scale = np.linalg.norm(np.array(obj.matrix_world)[:3, :3], axis=0)
     key = (obj.name, mesh.as_pointer(), len(mesh.vertices), len(mesh.polygons),
-           tuple(map(tuple, obj.matrix_world)), settings.size_mode, settings.voxel_size,
-           settings.resolution, settings.method, settings.compare_mc, settings.output)
+           tuple(f"{s:.6g}" for s in scale), settings.size_mode, settings.voxel_size,
+           settings.resolution, settings.method, settings.compare_mc, settings.output,
+           settings.threads)
     if key in _preview_cache:
         return _preview_cache[key]
     if len(_preview_cache) > 256:

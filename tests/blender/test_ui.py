@@ -368,3 +368,20 @@ def test_a_distance_within_sampling_noise_is_not_given_as_a_number(addon):
     assert "CD within sampling noise (< 10.40e-5)" in close.summary()
     far = remesh.Report(source="Part", made=[remesh.Made(None, "mc", 100, 1.0, 20e-5, 5.2e-5)])
     assert "CD 20.00e-5" in far.summary()
+
+
+def test_moving_an_object_keeps_its_cached_estimate(addon):
+    """The sidebar's grid and time do not depend on where the object is or how it is turned:
+    moving it reuses the cached preview; scaling it computes a new one."""
+    panels = importlib.import_module(f"{addon.module}.panels")
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    cube, settings = bpy.context.object, bpy.context.scene.agndc
+    panels._preview_cache.clear()
+    first = panels.preview(cube, settings, bpy.context)
+    cube.location = (5.0, -3.0, 2.0)
+    cube.rotation_euler = (0.3, 0.2, 0.1)
+    bpy.context.view_layer.update()
+    assert panels.preview(cube, settings, bpy.context) is first and len(panels._preview_cache) == 1
+    cube.scale = (2.0, 1.0, 1.0)
+    bpy.context.view_layer.update()
+    assert panels.preview(cube, settings, bpy.context) is not first
