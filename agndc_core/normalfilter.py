@@ -46,7 +46,8 @@ DEFAULT = NormalFilter()
 
 
 def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
-                params: NormalFilter = DEFAULT, fixed_vx3: np.ndarray | None = None) -> np.ndarray:
+                params: NormalFilter = DEFAULT, fixed_vx3: np.ndarray | None = None,
+                check=None) -> np.ndarray:
     """Denoise a triangle mesh, keeping its creases: (V, 3) float64 -> (V, 3) float64.
 
     Args:
@@ -55,6 +56,8 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
         params: the filter's widths and pass counts.
         fixed_vx3: optional (V, 3) bool, coordinates that must not move (a flat face or a
             bounding plane that an earlier stage placed: ``flatpatches.pinned_coordinates``).
+        check: called before every pass (e.g. raises ``CancelledError`` when a run is
+            cancelled: a pass takes well under a second even at 256³).
 
     Returns:
         (V, 3) float64 new vertex positions; the faces index them unchanged.
@@ -65,9 +68,10 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
         return vertices.copy()
     original, areas, centroids = face_geometry(vertices, faces)
     incidence = vertex_faces(faces, len(vertices))
-    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params)
+    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params,
+                                check)
     return fit_vertices(vertices, faces, incidence, normals, original, params.vertex_iterations,
-                        fixed_vx3)
+                        fixed_vx3, check)
 
 
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
@@ -123,7 +127,8 @@ def vertex_faces(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
         np.arange(len(faces)), 3))), shape=(n_vertices, len(faces)))
 
 
-def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) -> np.ndarray:
+def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter,
+                      check=None) -> np.ndarray:
     """``params.normal_iterations`` passes of bilateral averaging of face normals.
 
     Each pass: n_i <- normalise(a_i n_i + sum_j a_j W_s(|c_i - c_j|) W_r(|n_i - n_j|) n_j) over
@@ -146,6 +151,8 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
                             len(i))
     spatial = areas[j] * np.exp(-distance_sq / (2.0 * np.mean(distance_sq)))  # (P,)
     for _ in range(params.normal_iterations):
+        if check is not None:
+            check()
         difference_sq = _pairwise(lambda a, b, n=normals: _sq_norm(n[i[a:b]] - n[j[a:b]]),
                                   len(i))
         agreement = np.exp(-difference_sq / (2.0 * params.sigma_normal ** 2))
@@ -157,7 +164,7 @@ def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter) ->
 
 
 def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
-                 fixed=None) -> np.ndarray:
+                 fixed=None, check=None) -> np.ndarray:
     """Move each vertex towards the planes of its faces: x_v += mean over faces f of v of
     n_f (n_f . (c_f - x_v)), with c_f the face's current centroid, ``iterations`` times; the
     ``fixed`` (V, 3) coordinates do not move, and no face turns against its ``original``
@@ -174,6 +181,8 @@ def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
     outer = (incidence @ (normals[:, :, None] * normals[:, None, :]).reshape(n_faces, 9))
     outer = outer.reshape(n_vertices, 3, 3)  # (V, 3, 3) sum of n n^T over each vertex's faces
     for _ in range(iterations):
+        if check is not None:
+            check()
         centroids = face_geometry(vertices, faces)[2]  # (F, 3)
         pull = incidence @ (normals * _dot(normals, centroids)[:, None])  # (V, 3)
         step = pull - np.einsum("vij,vj->vi", outer, vertices)  # (V, 3)

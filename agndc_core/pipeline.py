@@ -82,9 +82,13 @@ class _Stages:
         self.progress, self.cancel, self.timings = progress, cancel, {}
         self._start = time.perf_counter()
 
-    def run(self, name: str, fraction: float, func, *args, **kwargs):
+    def check(self) -> None:
+        """Raise CancelledError once the run is cancelled (also called inside long stages)."""
         if self.cancel is not None and self.cancel.is_set():
             raise CancelledError("remesh cancelled")
+
+    def run(self, name: str, fraction: float, func, *args, **kwargs):
+        self.check()
         if self.progress is not None:
             self.progress(fraction, name)
         start = time.perf_counter()
@@ -177,7 +181,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
                                      min_component_faces=min_component_faces)
         if filtered:
             vertices = stages.run("normal filter", 0.95, filter_contoured_mesh, vertices,
-                                  faces, vertex, pinned)
+                                  faces, vertex, pinned, check=stages.check)
         if method in CHECKPOINT_NAMES:  # a network's vertices: no component turned inside out
             vertices = stages.run("fold check", 0.97, unfold_components, vertices, faces,
                                   lattice, edge, min_component_faces)
@@ -203,14 +207,15 @@ def unfold_components(vertices, faces, lattice, edge, min_component_faces: int =
     return restore_folded_components(vertices, faces, reference)[0]
 
 
-def filter_contoured_mesh(vertices, faces, vertex, pinned):
+def filter_contoured_mesh(vertices, faces, vertex, pinned, check=None):
     """``normalfilter.filter_mesh`` of a contoured mesh, in lattice units (where the network's
     noise is the same along every axis), keeping the coordinates the flat-patch and bounds
     stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets)."""
     from .flatpatches import pinned_coordinates
     from .normalfilter import filter_mesh
 
-    return filter_mesh(vertices, faces, fixed_vx3=pinned_coordinates(vertices, vertex, pinned))
+    return filter_mesh(vertices, faces, fixed_vx3=pinned_coordinates(vertices, vertex, pinned),
+                       check=check)
 
 
 def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray,

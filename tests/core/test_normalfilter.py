@@ -134,3 +134,24 @@ def test_remesh_filters_a_networks_mesh_only():
     assert volume[1] > 0 and abs(volume[1] / volume[0] - 1) < 0.02
     nets = remesh(grid, method="surfacenets", normal_filter=True)
     assert "normal filter" not in nets.timings
+
+
+def test_the_filter_checks_before_every_pass():
+    """A cancel reaches inside the filter: ``check`` runs before each of its passes."""
+    from agndc_core.errors import CancelledError
+    from agndc_core.normalfilter import DEFAULT, filter_mesh
+
+    _, vertices, faces = _noisy_box()
+    calls = []
+    filter_mesh(vertices, faces, check=lambda: calls.append(1))
+    assert len(calls) == DEFAULT.normal_iterations + DEFAULT.vertex_iterations
+
+    def cancel_on_third():
+        calls.append(1)
+        if len(calls) > 2:
+            raise CancelledError("cancelled")
+
+    calls.clear()
+    with pytest.raises(CancelledError):
+        filter_mesh(vertices, faces, check=cancel_on_third)
+    assert len(calls) == 3
