@@ -75,7 +75,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--out", type=Path, default=Path("out/eval"))
     p.add_argument("--methods", default="mc,oracle",
                    help=f"comma list of {','.join(METHODS)}; surfacenets, undc or agndc with "
-                        "'+bounds' also get the mesh's bounding box (agndc_core/evaluate.py); "
+                        "'+bounds' also get the mesh's bounding box "
+                        "(agndc_core/study/evaluate.py); "
                         "LABEL=METHOD scores a method under a label of its own, e.g. "
                         "cpu3=agndc with --checkpoint cpu3=PATH beside the shipped agndc")
     p.add_argument("--res", type=int, default=64)
@@ -100,7 +101,7 @@ def _parser() -> argparse.ArgumentParser:
                         "get the part's bounding box, as `agndc remesh` does for a mesh)")
     p.set_defaults(func=_cmd_demo)
 
-    from .report import add_parser as add_report_parser
+    from .study.report import add_parser as add_report_parser
 
     add_report_parser(sub)
     try:
@@ -214,7 +215,8 @@ def _cmd_batch(args) -> int:
 
 
 def _cmd_eval(args) -> int:
-    from .evaluate import (
+    from .pipeline import CHECKPOINT_NAMES
+    from .study.evaluate import (
         check_shifts,
         evaluate_meshes,
         headroom_lines,
@@ -226,7 +228,6 @@ def _cmd_eval(args) -> int:
         summarize_rows,
         write_report,
     )
-    from .pipeline import CHECKPOINT_NAMES
 
     methods = parse_methods(args.methods)
     learned_labels = {label for label, base, _ in map(method_parts, methods)
@@ -255,11 +256,11 @@ def _cmd_eval(args) -> int:
 
 
 def _cmd_demo(args) -> int:
-    from .evaluate import markdown_table, summarize_rows
     from .gridio import save_grid, save_mesh
     from .metrics import evaluate
     from .pipeline import remesh_mesh
-    from .shapes import cad_part
+    from .study.evaluate import markdown_table, summarize_rows
+    from .study.shapes import cad_part
 
     out = args.out
     out.mkdir(parents=True, exist_ok=True)

@@ -29,7 +29,7 @@ from agndc_core.gridio import load_mesh
 def make_grids(folder: Path, n: int, res: int) -> None:
     """``n`` procedural shapes (``shapes.generate_shape``) voxelised at ``res`` as .npy files."""
     from agndc_core.gridio import save_grid
-    from agndc_core.shapes import generate_shape
+    from agndc_core.study.shapes import generate_shape
     from agndc_core.voxelize import voxelize
 
     for seed in range(n):

@@ -21,7 +21,7 @@ from agndc_core.errors import CancelledError
 from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import predict_lattice
 from agndc_core.pipeline import _default_checkpoint, load_model
-from agndc_core.shapes import cad_part
+from agndc_core.study.shapes import cad_part
 from agndc_core.voxelize import voxelize
 
 

@@ -21,7 +21,7 @@ from scipy.optimize import nnls
 from agndc_core import pipeline, plan
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
-from agndc_core.shapes import generate_shape, shape_family
+from agndc_core.study.shapes import generate_shape, shape_family
 
 DISTANCE_SAMPLES = 30_000  # as agndc_blender/remesh.py
 

@@ -16,7 +16,7 @@ from agndc_core.contour import dual_contour
 from agndc_core.grid import pad_to_lattice
 from agndc_core.labels import make_labels
 from agndc_core.mc import marching_cubes_lattice
-from agndc_core.shapes import generate_shape
+from agndc_core.study.shapes import generate_shape
 from agndc_core.voxelize import voxelize
 
 

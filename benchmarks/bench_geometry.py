@@ -4,8 +4,8 @@
         [--no-flat-patches] [--no-normal-filter] [--source-bounds]
 
 An axis-aligned box (flatness, and RMS from the true planes), the box rotated 20/35 deg (face
-RMS, worst corner) and a sphere (radial RMS), errors in voxels; ``agndc_core/solids.py`` defines
-every number and holds the targets. The methods see the grid alone; ``--source-bounds`` also
+RMS, worst corner) and a sphere (radial RMS), errors in voxels; ``agndc_core/study/solids.py``
+defines every number and holds the targets. The methods see the grid alone; ``--source-bounds`` also
 gives them the solid's bounding box (``remesh(source_bounds=True)``, what mesh input gets by
 default; marching cubes and its smoothing ignore it). Marching cubes is the time ratio's
 baseline, measured in the same run. The two oracles contour the solid's exact labels
@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 
 from agndc_core.errors import AGNDCError
-from agndc_core.solids import TARGETS, measure
+from agndc_core.study.solids import TARGETS, measure
 
 METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle_binary", "oracle")
 

@@ -60,7 +60,7 @@ def make_grid(spec: str):
         path, res = spec[5:].rsplit("@", 1)
         vertices, faces = load_mesh(path)
         return voxelize(vertices, faces, int(res))
-    from agndc_core.shapes import generate_shape
+    from agndc_core.study.shapes import generate_shape
 
     vertices, faces = generate_shape(0)
     return voxelize(vertices, faces, int(spec))

@@ -17,7 +17,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from agndc_core import metrics as M
-from agndc_core.shapes import generate_shape
+from agndc_core.study.shapes import generate_shape
 
 TARGET_S = 3.0
 JITTER = 0.0005  # vertex noise of the fake prediction, normalised units (1/30 of a 64^3 cell)

@@ -31,7 +31,7 @@ def main() -> None:
 
     from agndc_core.normalfilter import filter_mesh, filter_mesh_naive
     from agndc_core.pipeline import remesh_mesh, taubin_smooth
-    from agndc_core.shapes import cad_part
+    from agndc_core.study.shapes import cad_part
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[64, 128])

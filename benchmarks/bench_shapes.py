@@ -1,4 +1,4 @@
-"""Throughput of the procedural shape generator (agndc_core.shapes).
+"""Throughput of the procedural shape generator (agndc_core.study.shapes).
 
 Generates ``--n`` shapes and prints shapes/s and the extrapolated time for 1,000 shapes
 (target: under 5 minutes). Baseline from the same run: building and meshing the same number
@@ -13,7 +13,7 @@ import time
 import numpy as np
 from manifold3d import Manifold
 
-from agndc_core.shapes import generate_shape
+from agndc_core.study.shapes import generate_shape
 
 TARGET_1000_S = 300.0  # 1,000 training shapes in under 5 minutes
 

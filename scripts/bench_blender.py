@@ -136,7 +136,7 @@ def main(argv) -> int:
     args = parse_args(argv)
     install_seconds = install(args.install_zip) if args.install_zip else None
     remesh, mesh_io = load_addon()
-    from agndc_core.shapes import cad_part
+    from agndc_core.study.shapes import cad_part
 
     bpy.ops.wm.read_homefile(use_empty=True)
     vertices, faces = cad_part(args.seed)

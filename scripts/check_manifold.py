@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agndc_core.evaluate import method_checkpoint, method_parts, parse_methods, require_meshes
 from agndc_core.gridio import load_grid, load_mesh
 from agndc_core.meshcheck import topology_violations
 from agndc_core.pipeline import MESH_ONLY_METHODS, remesh, remesh_mesh
+from agndc_core.study.evaluate import method_checkpoint, method_parts, parse_methods, require_meshes
 
 GRID_SUFFIXES = (".binvox", ".vox", ".npy", ".npz", ".nii", ".nii.gz")
 

@@ -39,14 +39,14 @@ import torch
 
 from agndc_core.checkpoint import default_checkpoint_path, load_checkpoint
 from agndc_core.contour import dual_contour
-from agndc_core.evaluate import grid_placements, require_meshes
 from agndc_core.grid import lattice_to_world, pad_to_lattice
 from agndc_core.gridio import load_mesh
 from agndc_core.inference import predict_lattice
 from agndc_core.labels import binary_visible_vertex, crossed_edges, make_labels
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import orient_to_affine, remesh
-from agndc_core.shapes import generate_shape, shape_family
+from agndc_core.study.evaluate import grid_placements, require_meshes
+from agndc_core.study.shapes import generate_shape, shape_family
 from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.voxelize import voxelize
 

@@ -20,14 +20,14 @@ import math
 import re
 from pathlib import Path
 
-from agndc_core.evaluate import (
+from agndc_core.metrics import REPORT_SCALE
+from agndc_core.study.evaluate import (
     HEADROOM_COLUMNS,
     METRIC_COLUMNS,
     headroom_shares,
     markdown_table,
     summarize_rows,
 )
-from agndc_core.metrics import REPORT_SCALE
 
 REFERENCE_METHODS = ("mc", "mc_taubin", "surfacenets", "oracle_binary", "oracle")
 #: the shipped networks, the end of long warm-started lineages, for scale

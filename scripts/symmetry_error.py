@@ -1,4 +1,5 @@
-"""How far a network is from the grid's symmetries (``agndc_core.symmetry``), beside surface nets.
+"""How far a network is from the grid's symmetries (``agndc_core.study.symmetry``), beside surface
+nets.
 
     .venv/bin/python scripts/symmetry_error.py [--checkpoint PATH ...] [--mesh FILE] [--res 64]
 
@@ -24,8 +25,8 @@ from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import predict_lattice
 from agndc_core.labels import crossed_edges, surface_cells
 from agndc_core.pipeline import load_model
+from agndc_core.study.symmetry import face_phase_offsets, symmetry_errors
 from agndc_core.surfacenets import surface_nets_lattice
-from agndc_core.symmetry import face_phase_offsets, symmetry_errors
 from agndc_core.voxelize import voxelize
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import AGNDCError
 from ..grid import pad_to_lattice
 from ..labels import make_labels
-from ..shapes import generate_shape, is_axis_aligned, shape_family
+from ..study.shapes import generate_shape, is_axis_aligned, shape_family
 from ..voxelize import voxelize
 
 RESOLUTION_RANGE = (32, 128)  # voxels on the longest side (random scale, log-uniform)

@@ -9,7 +9,7 @@ import numpy as np
 def cad_part(seed: int = 7) -> tuple[np.ndarray, np.ndarray]:
     """A generated CAD part: (V, 3) float64, (F, 3) int64, longest side 1, centred."""
     try:
-        from agndc_core.shapes import cad_part
+        from agndc_core.study.shapes import cad_part
     except ImportError:  # before the shape generator existed: a plate with a hole, by boolean
         return _box_with_hole()
     return cad_part(seed)

@@ -50,8 +50,8 @@ def test_manifest(built_zip):
         assert wheels and not any(n.startswith(("wheels/torch-", "wheels/nvidia")) for n in wheels)
     assert "files" in manifest["permissions"] and "network" not in manifest["permissions"]
     assert {"__init__.py", "_core.py", "agndc_core/__init__.py", "agndc_core/pipeline.py"} <= names
-    research = ("agndc_core/training", "agndc_core/evaluate", "agndc_core/report",
-                "agndc_core/shapes", "agndc_core/nn/agdrnet")
+    research = ("agndc_core/training", "agndc_core/study", "agndc_core/evaluate",
+                "agndc_core/report", "agndc_core/shapes", "agndc_core/nn/agdrnet")
     assert not any(n.startswith(research) or "__pycache__" in n for n in names)
     weights = sorted((ROOT / "agndc_core" / "weights").glob("*.safetensors"))
     assert {f"agndc_core/weights/{w.name}" for w in weights} <= names  # shipped weights vendored

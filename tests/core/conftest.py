@@ -68,6 +68,6 @@ def dev_mesh_paths():
     """Meshes of ../shared/data/dev (skips the test when the folder is missing)."""
     if not DEV_DATA.exists():
         pytest.skip("../shared/data/dev is not beside the checkout")
-    from agndc_core.evaluate import find_meshes
+    from agndc_core.study.evaluate import find_meshes
 
     return find_meshes(DEV_DATA)

@@ -19,7 +19,7 @@ from agndc_core.cli import main
 from agndc_core.errors import AGNDCError
 from agndc_core.gridio import TEMP_MARK, load_grid, save_grid, save_mesh
 from agndc_core.pipeline import remesh_file, resolution_for_voxel_size
-from agndc_core.shapes import generate_shape
+from agndc_core.study.shapes import generate_shape
 from agndc_core.voxelize import voxelize
 from conftest import REPO
 

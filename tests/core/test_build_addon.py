@@ -53,7 +53,7 @@ def test_staged_core_is_the_product_without_torch(tmp_path):
     modules, and nothing staged imports torch."""
     stage = build_addon.stage_sources(tmp_path / "agndc_remesher")
     core = stage / "agndc_core"
-    for research in ("training", "evaluate.py", "report.py", "symmetry.py", "solids.py",
+    for research in ("training", "study", "evaluate.py", "report.py", "symmetry.py", "solids.py",
                      "shapes.py", "cli.py", "nn/agdrnet.py", "nn/band_ops.py"):
         assert not (core / research).exists(), research
     assert (core / "weights" / "agndc.safetensors").is_file()

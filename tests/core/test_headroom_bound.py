@@ -64,7 +64,7 @@ def test_generated_shapes_are_held_out_seeds_named_by_family():
     """--generated N scores the generator's own shapes from the held-out seed range."""
     import argparse
 
-    from agndc_core.shapes import shape_family
+    from agndc_core.study.shapes import shape_family
 
     script = _script()
     args = argparse.Namespace(generated=2, dev="unused", limit=None)

@@ -9,7 +9,7 @@ from agndc_core import plan
 from agndc_core.errors import MeshError
 from agndc_core.grid import MAX_VOXELS, pad_to_lattice
 from agndc_core.labels import crossed_edges
-from agndc_core.shapes import cad_part
+from agndc_core.study.shapes import cad_part
 from agndc_core.voxelize import voxelize
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from agndc_core.errors import CancelledError
 from agndc_core.pipeline import remesh_mesh, subrange
-from agndc_core.shapes import cad_part
+from agndc_core.study.shapes import cad_part
 
 
 @pytest.mark.parametrize("method", ["mc", "sharp", "surfacenets"])

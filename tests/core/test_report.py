@@ -10,7 +10,8 @@ import trimesh
 
 from agndc_core.checkpoint import default_checkpoint_path
 from agndc_core.errors import AGNDCError
-from agndc_core.evaluate import (
+from agndc_core.grid import VoxelGrid
+from agndc_core.study.evaluate import (
     evaluate_meshes,
     grid_shifts,
     headroom_line,
@@ -21,8 +22,7 @@ from agndc_core.evaluate import (
     shift_table,
     summarize_rows,
 )
-from agndc_core.grid import VoxelGrid
-from agndc_core.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
+from agndc_core.study.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 
 
 def test_voxel_faces_of_a_block_is_its_closed_box():
@@ -217,7 +217,7 @@ def test_evaluation_on_shifted_grids(tmp_path):
 def test_models_table_says_where_the_weights_were_trained():
     """The training column names the last run's hardware and the lineage's total, and an old
     record without either reads as the CPU."""
-    from agndc_core.report import _lineage_total, _trained_on
+    from agndc_core.study.report import _lineage_total, _trained_on
 
     gpu = {"lineage": [{"hardware": "CPU VM"}, {"hardware": "one NVIDIA H100, bf16 autocast"}],
            "total_train_seconds": 600.0}

@@ -12,7 +12,7 @@ from agndc_core.grid import pad_to_lattice
 from agndc_core.inference import predict_lattice
 from agndc_core.runtime import Network, load_network
 from agndc_core.runtime.parallel import get_threads, set_threads
-from agndc_core.shapes import generate_shape
+from agndc_core.study.shapes import generate_shape
 from agndc_core.voxelize import voxelize
 
 #: the issue's bound on the runtimes' disagreement, in voxels (measured: ~1e-5)

@@ -1,4 +1,5 @@
-"""Tests of agndc_core.shapes: validity, normalisation, determinism, family mix and diversity."""
+"""Tests of agndc_core.study.shapes: validity, normalisation, determinism, family mix and
+diversity."""
 
 import time
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from agndc_core.shapes import (
+from agndc_core.study.shapes import (
     AXIS_ALIGNED_FRACTION,
     FAMILIES,
     FAMILY_WEIGHTS,

@@ -11,8 +11,8 @@ import pytest
 from agndc_core.checkpoint import count_parameters, default_checkpoint_path, load_checkpoint
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
-from agndc_core.shapes import generate_shape
-from agndc_core.solids import TARGETS, measure
+from agndc_core.study.shapes import generate_shape
+from agndc_core.study.solids import TARGETS, measure
 
 #: seeds far outside the training (0..) and validation (1,000,000..) ranges
 HELD_OUT_SEEDS = (7_000_001, 7_000_002, 7_000_003, 7_000_004, 7_000_005, 7_000_006)
@@ -75,7 +75,7 @@ def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
 
 @pytest.mark.slow
 def test_shipped_agndc_meets_the_geometric_targets(tmp_path):
-    """The analytic solids at 64³ (agndc_core/solids.py): flat box faces, the rotated box's
+    """The analytic solids at 64³ (agndc_core/study/solids.py): flat box faces, the rotated box's
     faces and a sphere within their targets; the rotated box's corners (target 0.5 voxel, not
     met: 0.88 measured) at least nearer than surface nets puts them.
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from agndc_core.grid import pad_to_lattice
+from agndc_core.study.symmetry import _unmirror, face_phase_offsets, symmetry_errors
 from agndc_core.surfacenets import surface_nets_lattice
-from agndc_core.symmetry import _unmirror, face_phase_offsets, symmetry_errors
 
 
 def _blob(seed=0, n=14):

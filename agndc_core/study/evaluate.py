@@ -19,8 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AGNDCError
-from .pipeline import remesh_mesh
+from ..errors import AGNDCError
+from ..pipeline import remesh_mesh
 
 METRIC_COLUMNS = ("cd", "f1", "nc", "ecd", "ef1")
 HEADERS = {"cd": "CD×10⁵ ↓", "f1": "F1 ↑", "nc": "NC ↑", "ecd": "ECD×10² ↓", "ef1": "EF1 ↑"}
@@ -36,7 +36,7 @@ CATEGORIES = {"cad": "CAD", "organic": "organic", "print (Thingi10K)": "Thingi10
 
 def find_meshes(folder: Path) -> list[tuple[Path, str]]:
     """Meshes under ``folder`` with their category, from MANIFEST.csv when there is one."""
-    from .gridio import is_mesh_path
+    from ..gridio import is_mesh_path
 
     folder = Path(folder)
     if folder.is_file():
@@ -55,7 +55,7 @@ def parse_methods(text: str) -> list[str]:
     """``"mc,agndc+bounds,cpu3=agndc"`` -> ["mc", "agndc+bounds", "cpu3=agndc"]; unknown names
     raise one clear error. ``LABEL=METHOD`` evaluates METHOD under its own label (a second
     network of the same method, with ``checkpoints[LABEL]``; ``method_parts``)."""
-    from .pipeline import BOUNDED_METHODS, METHODS
+    from ..pipeline import BOUNDED_METHODS, METHODS
 
     methods = [m.strip() for m in text.split(",") if m.strip()]
     parts = [method_parts(name) for name in methods]
@@ -142,8 +142,8 @@ def evaluate_meshes(meshes, methods, *, resolution=64, n_samples=100_000, checkp
     """
     from tqdm import tqdm
 
-    from .gridio import load_mesh
-    from .metrics import evaluate
+    from ..gridio import load_mesh
+    from ..metrics import evaluate
 
     checkpoints = checkpoints or {}
     check_shifts(shifts)
@@ -197,7 +197,7 @@ def summarize_rows(rows, by=("method",)) -> list[dict]:
 
 def markdown_table(summaries, first="method") -> str:
     """Paper-style table: CD×10⁵, F1, NC, ECD×10², EF1 (and seconds)."""
-    from .metrics import REPORT_SCALE
+    from ..metrics import REPORT_SCALE
 
     head = [first, "shapes"] + [HEADERS[c] for c in METRIC_COLUMNS] + ["time s"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -215,7 +215,7 @@ def shift_table(rows, columns=HEADROOM_COLUMNS) -> str:
     """Markdown: each method's mean per shift (``evaluate_meshes(shifts=K)``) for ``columns``,
     and the standard deviation of those means: how far one grid placement moves a mean, the
     noise a difference between methods has to exceed."""
-    from .metrics import REPORT_SCALE
+    from ..metrics import REPORT_SCALE
 
     shifts = sorted({r["shift"] for r in rows if r["shift"] is not None})
     summaries = summarize_rows([r for r in rows if r["shift"] is not None], by=("method", "shift"))

@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .grid import crossed_edges, surface_cells
+from ..grid import crossed_edges, surface_cells
 
 #: vertex predictor: (X, Y, Z) bool lattice -> (X, Y, Z, 3) offsets of each cell's vertex from its
 #: min corner, in voxels (``surface_nets_lattice``, ``inference.predict_lattice``'s vertices)
@@ -76,7 +76,7 @@ def face_phase_offsets(predict: Predictor, lattice: np.ndarray, axis: int = 2, *
         (multiple, 2) float: per shift, the mean offset (voxels, along +axis) of the low face and
         of the high face. Zero everywhere for a predictor that respects shifts and mirrors there.
     """
-    from .surfacenets import surface_nets_lattice
+    from ..surfacenets import surface_nets_lattice
 
     lattice = np.asarray(lattice, dtype=bool)
     out = np.zeros((multiple, 2))

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 from .evaluate import (
     METRIC_COLUMNS,
     check_shifts,
@@ -33,7 +34,6 @@ from .evaluate import (
     summarize_rows,
     write_report,
 )
-from .pipeline import CHECKPOINT_NAMES, TAUBIN_ITERATIONS
 
 REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "oracle_binary", "oracle",
                   "surfacenets+bounds", "undc+bounds", "agndc+bounds")
@@ -221,7 +221,7 @@ def _time_table(rows) -> str:
 
 
 def _per_shape_table(rows, column) -> str:
-    from .metrics import REPORT_SCALE
+    from ..metrics import REPORT_SCALE
 
     methods = list(dict.fromkeys(r["method"] for r in rows))
     lines = ["| shape | category | " + " | ".join(methods) + " |",
@@ -245,8 +245,8 @@ ABLATION_SWITCHES = (("multi-scale", lambda c: c["levels"] > 0),
 
 def _ablation_table(rows, resolution, ablation_rows) -> str:
     """One line per configuration (modules ticked), baseline first and full AGNDC last."""
-    from .checkpoint import default_checkpoint_path
-    from .metrics import REPORT_SCALE
+    from ..checkpoint import default_checkpoint_path
+    from ..metrics import REPORT_SCALE
 
     entries = []
     for method in ("undc", *ablation_rows, "agndc"):
@@ -270,7 +270,7 @@ def _ablation_table(rows, resolution, ablation_rows) -> str:
 
 
 def _models_table(methods) -> str:
-    from .checkpoint import default_checkpoint_path
+    from ..checkpoint import default_checkpoint_path
 
     lines = ["| method | checkpoint | config | parameters | weights | training |",
              "|---|---|---|---|---|---|"]
@@ -324,7 +324,7 @@ def _lineage_total(training: dict) -> str:
 
 
 def _inference_threads() -> int:
-    from .runtime.parallel import get_threads
+    from ..runtime.parallel import get_threads
 
     return get_threads()
 
@@ -341,7 +341,7 @@ def render_figure(meshes, names, path, *, resolution=64) -> bool:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .pipeline import remesh_mesh
+    from ..pipeline import remesh_mesh
 
     chosen = _figure_shapes(meshes, names)
     if not chosen:
@@ -369,7 +369,7 @@ def render_figure(meshes, names, path, *, resolution=64) -> bool:
 
 def _figure_shapes(meshes, names) -> list[tuple]:
     """(name, category, (V, 3) float vertices, (F, 3) int faces) for each name that exists."""
-    from .gridio import load_mesh
+    from ..gridio import load_mesh
 
     chosen = []
     for name in names:
@@ -457,7 +457,7 @@ def add_parser(sub) -> None:
 
 
 def _cmd_report(args) -> int:
-    from .errors import AGNDCError
+    from ..errors import AGNDCError
 
     methods = parse_methods(args.methods)
     ablations = {}

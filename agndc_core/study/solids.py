@@ -23,7 +23,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from .pipeline import remesh_mesh
+from ..pipeline import remesh_mesh
 
 #: the quality targets, in voxels (box RMS has none: a binary grid cannot place an axis-aligned
 #: face within its layer, see labels.binary_oracle_vertex)
