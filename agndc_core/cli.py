@@ -6,6 +6,7 @@ Every user-facing failure is an ``AGNDCError``; the CLI prints its message and e
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
@@ -14,6 +15,8 @@ from .methods import METHODS, REGISTRY
 
 
 def main(argv=None) -> int:
+    # the library reports through ``logging`` (e.g. a resumed training run); the CLI shows it
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
     parser = _parser()
     args = parser.parse_args(argv)
     if not hasattr(args, "func"):

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -29,6 +30,8 @@ from ..nn.loss import QUADRIC_FLOOR
 from ..surfacenets import surface_nets_lattice
 from .crops import SparseSample, make_crop, random_crop_origin, valid_cells
 from .data import load_sample
+
+log = logging.getLogger(__name__)
 
 #: largest file the trainer writes (state shards included): under the 16 MiB a file returned from
 #: the GPU machine of the runbook may have (docs/training.md)
@@ -157,9 +160,9 @@ class Trainer:
         if differ:
             self.warm_start = _load_matching(self.model, source.state_dict())
             self.warm_start["checkpoint"] = str(path)
-            print(f"warm start from {path}: {self.warm_start['loaded']} tensors loaded; "
-                  f"fresh: {', '.join(self.warm_start['fresh']) or 'none'}; "
-                  f"dropped: {', '.join(self.warm_start['dropped']) or 'none'}")
+            log.info("warm start from %s: %d tensors loaded; fresh: %s; dropped: %s", path,
+                     self.warm_start["loaded"], ", ".join(self.warm_start["fresh"]) or "none",
+                     ", ".join(self.warm_start["dropped"]) or "none")
         else:
             self.model.load_state_dict(source.state_dict())
         if self.model_config.surface_nets_prior and not source.config.surface_nets_prior:
@@ -632,5 +635,5 @@ def train(cfg: TrainConfig, resume: bool = False, progress: bool = True) -> Path
     ``cfg.max_seconds`` ran out first (resume to continue)."""
     trainer = Trainer(cfg)
     if resume and trainer.resume():
-        print(f"resumed {cfg.out} at scale {trainer.scale}, step {trainer.step}")
+        log.info("resumed %s at scale %d, step %d", cfg.out, trainer.scale, trainer.step)
     return trainer.run(progress=progress)
