@@ -2,7 +2,6 @@
 running one, help), plus draw hooks for Object Data > Remesh, the Object menu (so F3 finds the
 operator) and File > Import. Drawing only; the work is in operators.py and remesh.py."""
 
-import os
 from functools import lru_cache
 from pathlib import Path
 
@@ -94,7 +93,7 @@ def preview(obj, settings, context):
     rotating the object changes neither (the grid follows the object's own axes), so dragging
     it around recomputes nothing."""
     from ._core import errors, plan
-    from .remesh import frame_of, resolve_threads
+    from .remesh import estimate_run, frame_of, run_methods
 
     evaluated = obj.evaluated_get(context.evaluated_depsgraph_get()) \
         if settings.use_modifiers else obj
@@ -121,13 +120,9 @@ def preview(obj, settings, context):
         scale = frame * world_per_unit
         cofactor = np.array([scale[1] * scale[2], scale[0] * scale[2], scale[0] * scale[1]])
         crossings = plan.area_crossings(mesh_io.polygon_areas(mesh) * cofactor, grid.voxel_size)
-        methods = [settings.method]
-        if settings.compare_mc and settings.method != "mc" and settings.output != "REPLACE":
-            methods.append("mc")
-        threads = resolve_threads(settings.threads) or os.cpu_count() or 1
-        # a distance per result plus the source's own (the operator's sampling noise)
-        seconds = sum(plan.estimate_seconds(m, grid.shape, crossings, distances=1 + (k == 0),
-                                            threads=threads) for k, m in enumerate(methods))
+        methods = run_methods(settings.method, settings.compare_mc, settings.output == "REPLACE")
+        # the operator measures the distances of a mesh's results
+        seconds = estimate_run(methods, grid.shape, crossings, settings.threads, distances=True)
         result = (grid.shape, seconds, "")
     except errors.AGNDCError as exc:
         result = ((), 0.0, str(exc).removeprefix(f"{obj.name}: "))

@@ -78,8 +78,24 @@ class Settings:
 
     def methods(self) -> list[str]:
         """The methods each input is reconstructed with (the result, then MC to compare)."""
-        compare = self.compare_mc and self.method != "mc" and not self.replace_source
-        return [self.method, "mc"] if compare else [self.method]
+        return run_methods(self.method, self.compare_mc, self.replace_source)
+
+
+def run_methods(method: str, compare_mc: bool, replace_source: bool) -> list[str]:
+    """The chosen method, then marching cubes to compare unless it is MC or replaces the source
+    (the operator's runs and the sidebar's estimate read this one rule)."""
+    compare = compare_mc and method != "mc" and not replace_source
+    return [method, "mc"] if compare else [method]
+
+
+def estimate_run(methods, shape, crossings: float, threads: int, distances: bool) -> float:
+    """Estimated seconds of one input's run (``plan.estimate_seconds`` per method) with the
+    network's thread count (``resolve_threads``); with ``distances``, the Chamfer distance of
+    each result to the source and one of the source to itself (its sampling noise)."""
+    count = resolve_threads(threads) or os.cpu_count() or 1
+    return sum(plan.estimate_seconds(method, shape, crossings, threads=count,
+                                     distances=int(distances) * (2 if k == 0 else 1))
+               for k, method in enumerate(methods))
 
 
 @dataclass
@@ -266,13 +282,8 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
         job.warnings.append(f"{name} is not closed ({job.open_edges:,} open edges): remeshed as "
                             f"the solid it encloses; {OPEN_MESH_HINT}")
     crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
-    threads = resolve_threads(settings.threads) or os.cpu_count() or 1
-    # one distance per result, and one of the source to itself (the sampling noise)
-    distances = [int(settings.distance)] * len(settings.methods())
-    distances[0] += int(settings.distance)
-    job.estimate = sum(plan.estimate_seconds(method, grid.shape, crossings, distances=d,
-                                             threads=threads)
-                       for method, d in zip(settings.methods(), distances))
+    job.estimate = estimate_run(settings.methods(), grid.shape, crossings, settings.threads,
+                                settings.distance)
     return job
 
 
@@ -335,10 +346,9 @@ def _estimate_grid_job(job: Job, settings: Settings) -> None:
     job.grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
     job.shape = tuple(job.grid.shape)
     crossings = plan.grid_crossings(job.grid.occupancy)
-    threads = resolve_threads(settings.threads) or os.cpu_count() or 1
     # no source mesh: no Chamfer distance to report
-    job.estimate = sum(plan.estimate_seconds(method, job.shape, crossings, threads=threads)
-                       for method in settings.methods())
+    job.estimate = estimate_run(settings.methods(), job.shape, crossings, settings.threads,
+                                distances=False)
 
 
 def _grid_file_jobs(path: Path, name: str, settings: Settings) -> list[Job]:

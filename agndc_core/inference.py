@@ -35,6 +35,7 @@ import numpy as np
 
 from .errors import AGNDCError, CancelledError, GridError
 from .grid import LATTICE_PAD, occupancy_pyramid, pad_to_lattice
+from .runtime.band import sigmoid
 
 #: band vs dense agreement (absolute, network output units) where the band covers the network's
 #: receptive field: float32 rounding of a different summation order only
@@ -120,10 +121,7 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     pred = _to_numpy(pred)[:shape[0], :shape[1], :shape[2]]
     vertex = np.ascontiguousarray(pred[..., :3])
     np.clip(vertex, 0.0, 1.0, out=vertex)
-    edge_prob = None
-    if edges:
-        edge_prob = np.ascontiguousarray((1.0 / (1.0 + np.exp(-pred[..., 3:]))),
-                                         dtype=np.float32)
+    edge_prob = sigmoid(pred[..., 3:]) if edges else None
     report(1.0, "network done")
     return vertex, edge_prob
 
