@@ -22,6 +22,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .config import AGNDCConfig
+from .layout import relative_position_index
 
 
 class WindowBlock(nn.Module):
@@ -41,12 +42,8 @@ class WindowBlock(nn.Module):
         self.bias_table = nn.Parameter(torch.zeros(span ** 3, heads))
         nn.init.trunc_normal_(self.bias_table, std=0.02)
         # (w^3, w^3) index of the relative offset between tokens i and j into bias_table
-        axis = torch.arange(window)
-        # (w^3, 3) token positions inside a window, C order (the order ops.windows uses)
-        pos = torch.stack(torch.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-        rel = pos[:, None, :] - pos[None, :, :] + window - 1
-        index = (rel[..., 0] * span + rel[..., 1]) * span + rel[..., 2]
-        self.register_buffer("bias_index", index, persistent=False)
+        self.register_buffer("bias_index", torch.from_numpy(relative_position_index(window)),
+                             persistent=False)
 
     def forward(self, x: torch.Tensor, ops, radius) -> torch.Tensor:
         qkv = self.qkv(self.norm1(x))

@@ -51,6 +51,16 @@ class BandRows:
         return x[:self.rows(radius)]
 
 
+def relative_position_index(window: int) -> np.ndarray:
+    """(w^3, w^3) index into an LWSA block's ``(2w - 1)^3`` relative position bias table of the
+    offset between tokens i and j (tokens in C order inside a window, as ``windows`` gathers)."""
+    span = 2 * window - 1
+    axis = np.arange(window)
+    pos = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    rel = pos[:, None, :] - pos[None, :, :] + window - 1
+    return (rel[..., 0] * span + rel[..., 1]) * span + rel[..., 2]
+
+
 def cube_offsets(k: int) -> np.ndarray:
     """(k^3, 3) int64 neighbour offsets of a k x k x k kernel, in ``nn.Conv3d`` weight order."""
     r = range(-(k // 2), k // 2 + 1)

@@ -16,7 +16,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..nn.config import AGNDCConfig
-from ..nn.layout import crpm_radii, lookup_margin, torus_periods
+from ..nn.layout import crpm_radii, lookup_margin, relative_position_index, torus_periods
 from .band import Band, scale_band, sigmoid
 from .parallel import blas_single_thread, for_chunks
 
@@ -74,6 +74,7 @@ class Network:
     def __init__(self, config: AGNDCConfig, tensors: dict[str, np.ndarray]):
         self.config = config
         self.tensors = tensors
+        self._layers: dict = {}  # weights laid out for the band ops, built on first use
         self.slope = np.float32(config.act_slope)
         self.tick = None  # progress/cancel callback, called between layers (inference.py)
 
@@ -96,29 +97,26 @@ class Network:
             self.tick = None
 
     # ------------------------------------------------------------------ parameters
+    def _layer(self, key, build):
+        if key not in self._layers:
+            self._layers[key] = build()
+        return self._layers[key]
+
     def conv(self, name: str) -> Conv:
-        key = ("conv", name)
-        if key not in self.tensors:
-            self.tensors[key] = Conv(self.tensors[name + ".weight"], self.tensors[name + ".bias"])
-        return self.tensors[key]
+        return self._layer(("conv", name), lambda: Conv(self.tensors[name + ".weight"],
+                                                        self.tensors[name + ".bias"]))
 
     def linear(self, name: str) -> Linear:
-        key = ("linear", name)
-        if key not in self.tensors:
-            self.tensors[key] = Linear(self.tensors[name + ".weight"],
-                                       self.tensors[name + ".bias"])
-        return self.tensors[key]
+        return self._layer(("linear", name), lambda: Linear(self.tensors[name + ".weight"],
+                                                            self.tensors[name + ".bias"]))
 
     def offset_rows(self, name: str, axis: int) -> Linear:
         """The rows of DSConv's offset layer that drive the snake along ``axis`` (its outputs
         are (3 snakes, 2 lateral axes, K taps), snake-major)."""
-        key = ("offset", name, axis)
-        if key not in self.tensors:
-            weight, bias = self.tensors[name + ".weight"], self.tensors[name + ".bias"]
-            n = weight.shape[0] // 3
-            self.tensors[key] = Linear(weight[axis * n:(axis + 1) * n],
-                                       bias[axis * n:(axis + 1) * n])
-        return self.tensors[key]
+        weight, bias = self.tensors[name + ".weight"], self.tensors[name + ".bias"]
+        n = weight.shape[0] // 3
+        rows = slice(axis * n, (axis + 1) * n)
+        return self._layer(("offset", name, axis), lambda: Linear(weight[rows], bias[rows]))
 
     def has(self, name: str) -> bool:
         return name + ".weight" in self.tensors or name + ".bias_table" in self.tensors
@@ -212,17 +210,13 @@ class Network:
 
     def attention_bias(self, prefix: str) -> np.ndarray:
         """(heads, w^3, w^3) relative position bias of one window block."""
-        key = ("bias", prefix)
-        if key not in self.tensors:
-            w = self.config.window
-            span = 2 * w - 1
-            axis = np.arange(w)
-            pos = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
-            rel = pos[:, None, :] - pos[None, :, :] + w - 1
-            index = (rel[..., 0] * span + rel[..., 1]) * span + rel[..., 2]
-            table = self.tensors[prefix + ".bias_table"]
-            self.tensors[key] = np.ascontiguousarray(table[index].transpose(2, 0, 1))
-        return self.tensors[key]
+        table = self.tensors[prefix + ".bias_table"]
+
+        def build():
+            index = relative_position_index(self.config.window)
+            return np.ascontiguousarray(table[index].transpose(2, 0, 1))
+
+        return self._layer(("bias", prefix), build)
 
     # ------------------------------------------------------------------ FDM, DFFM, CRPM
     def fdm(self, ops: Band, f, prefix: str, radius: int):
