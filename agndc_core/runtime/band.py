@@ -77,6 +77,7 @@ class Band(BandRows):
         self.strides = (self.padded_shape[1] * self.padded_shape[2], self.padded_shape[2], 1)
         self._volumes: dict[int, np.ndarray] = {}
         self._neighbours: dict[tuple, np.ndarray] = {}
+        self._steps: dict[int, np.ndarray] = {}
         self._band_index = None
 
     @classmethod
@@ -136,10 +137,13 @@ class Band(BandRows):
                     self.torus_type[:, None]).astype(np.intp)
             parts.append(self._neighbours[key][a:min(b, t)])
         if b > t:
-            # band rows: offsets are affine in the padded volume (k // 2 < margin)
-            step = cube_offsets(k) @ np.array(self.strides)
+            # band rows: offsets are affine in the padded volume (k // 2 < margin); the k^3
+            # steps once per kernel size, not per chunk
+            if k not in self._steps:
+                self._steps[k] = cube_offsets(k) @ np.array(self.strides)
             centre = self.band_index()[max(a, t) - t:b - t]
-            parts.append(self.volume(radius_in)[centre[:, None] + step].astype(np.intp))
+            parts.append(self.volume(radius_in)[centre[:, None] + self._steps[k]]
+                         .astype(np.intp))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
     # ------------------------------------------------------------------ bookkeeping
