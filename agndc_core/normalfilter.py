@@ -96,12 +96,22 @@ def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 PAIR_CHUNK = 1 << 20
 
 
-def _pairwise(function, n: int) -> np.ndarray:
-    """(n,) float64: ``function(a, b)`` evaluated on consecutive chunks of the pairs."""
-    out = np.empty(n, dtype=np.float64)
-    for a in range(0, n, PAIR_CHUNK):
-        out[a:a + PAIR_CHUNK] = function(a, min(a + PAIR_CHUNK, n))
+def _pairwise(function, n: int, out: np.ndarray | None = None) -> np.ndarray:
+    """(n,) float64: ``function(a, b)`` evaluated on consecutive chunks of the pairs (into
+    ``out`` when given)."""
+    out = np.empty(n, dtype=np.float64) if out is None else out
+
+    def fill(a, b):
+        out[a:b] = function(a, b)
+
+    _in_chunks(n, fill)
     return out
+
+
+def _in_chunks(n: int, work) -> None:
+    """``work(a, b)`` on consecutive chunks of ``PAIR_CHUNK`` pairs."""
+    for a in range(0, n, PAIR_CHUNK):
+        work(a, min(a + PAIR_CHUNK, n))
 
 
 def _sq_norm(u: np.ndarray) -> np.ndarray:
@@ -113,12 +123,20 @@ def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", u, v)
 
 
-def face_neighbours(incidence: sp.csr_matrix) -> np.ndarray:
-    """(P, 2) ordered pairs (i, j), i != j, of faces sharing at least one vertex, from the
-    (V, F) ``vertex_faces`` incidence."""
-    linked = (incidence.T @ incidence).tocoo()  # faces linked through a shared vertex
-    keep = linked.row != linked.col
-    return np.stack([linked.row[keep], linked.col[keep]], axis=1).astype(np.int64)
+def face_neighbours(incidence: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
+    """The faces sharing at least one vertex with each face (itself excluded), as the rows of a
+    CSR matrix: ``indptr`` (F + 1,) and ``neighbours`` (P,) int32, from the (V, F)
+    ``vertex_faces`` incidence. The structure is built once and every normal pass refills only
+    its values: at 256³ P is ~10^7, and (P, 2) int64 pairs alone would be 160 MB."""
+    counts = incidence.astype(np.int8)  # a face pair shares at most 3 vertices
+    linked = (counts.T @ counts).tocsr()  # faces linked through a shared vertex
+    n_faces = linked.shape[0]
+    rows = np.repeat(np.arange(n_faces, dtype=np.int32), np.diff(linked.indptr))
+    keep = linked.indices != rows
+    index_type = np.int32 if keep.sum() < np.iinfo(np.int32).max else np.int64
+    indptr = np.zeros(n_faces + 1, dtype=index_type)
+    np.cumsum(np.bincount(rows[keep], minlength=n_faces), out=indptr[1:])
+    return indptr, linked.indices[keep].astype(index_type)
 
 
 def vertex_faces(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
@@ -127,36 +145,35 @@ def vertex_faces(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
         np.arange(len(faces)), 3))), shape=(n_vertices, len(faces)))
 
 
-def bilateral_normals(normals, areas, centroids, pairs, params: NormalFilter,
+def bilateral_normals(normals, areas, centroids, neighbours, params: NormalFilter,
                       check=None) -> np.ndarray:
     """``params.normal_iterations`` passes of bilateral averaging of face normals.
 
     Each pass: n_i <- normalise(a_i n_i + sum_j a_j W_s(|c_i - c_j|) W_r(|n_i - n_j|) n_j) over
-    the faces j sharing a vertex with i, with Gaussian W_s of width the mean centroid distance
-    of the neighbours (scale-free) and W_r of width ``params.sigma_normal``.
+    the faces j sharing a vertex with i (``neighbours``: the (indptr, j) rows of
+    ``face_neighbours``), with Gaussian W_s of width the mean centroid distance of the
+    neighbours (scale-free) and W_r of width ``params.sigma_normal``.
     """
-    i, j = pairs[:, 0], pairs[:, 1]
+    indptr, j = neighbours
     n_faces = len(normals)
-    if len(pairs) == 0:
+    if len(j) == 0:
         return normals
-    # pairs come sorted by i (face_neighbours): the weight matrix's rows, built once; each pass
-    # only refills its values. Pair quantities are computed in chunks (10^7 pairs at 256³:
-    # a full (P, 3) float64 temporary is 240 MB)
-    order_ok = bool(np.all(i[1:] >= i[:-1]))
-    if not order_ok:
-        sort = np.lexsort((j, i))
-        i, j = i[sort], j[sort]
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(i, minlength=n_faces))])
-    distance_sq = _pairwise(lambda a, b: _sq_norm(centroids[i[a:b]] - centroids[j[a:b]]),
-                            len(i))
-    spatial = areas[j] * np.exp(-distance_sq / (2.0 * np.mean(distance_sq)))  # (P,)
+    i = np.repeat(np.arange(n_faces, dtype=j.dtype), np.diff(indptr))  # (P,) row of each pair
+    # pair quantities are computed in chunks and in place (10^7 pairs at 256³: every (P,)
+    # float64 temporary is 80 MB, a (P, 3) one 240 MB)
+    spatial = _pairwise(lambda a, b: _sq_norm(centroids[i[a:b]] - centroids[j[a:b]]), len(i))
+    np.divide(spatial, -2.0 * np.mean(spatial), out=spatial)
+    np.exp(spatial, out=spatial)
+    _in_chunks(len(j), lambda a, b: np.multiply(areas[j[a:b]], spatial[a:b], out=spatial[a:b]))
+    weights = sp.csr_matrix((np.empty(len(j)), j, indptr), shape=(n_faces, n_faces))
     for _ in range(params.normal_iterations):
         if check is not None:
             check()
-        difference_sq = _pairwise(lambda a, b, n=normals: _sq_norm(n[i[a:b]] - n[j[a:b]]),
-                                  len(i))
-        agreement = np.exp(-difference_sq / (2.0 * params.sigma_normal ** 2))
-        weights = sp.csr_matrix((spatial * agreement, j, indptr), shape=(n_faces, n_faces))
+        agreement = _pairwise(lambda a, b, n=normals: _sq_norm(n[i[a:b]] - n[j[a:b]]), len(i),
+                              out=weights.data)
+        np.divide(agreement, -2.0 * params.sigma_normal ** 2, out=agreement)
+        np.exp(agreement, out=agreement)
+        agreement *= spatial
         summed = areas[:, None] * normals + weights @ normals  # (F, 3)
         length = np.sqrt(_dot(summed, summed))[:, None]
         normals = np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)

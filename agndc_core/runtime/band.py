@@ -167,12 +167,13 @@ class Band(BandRows):
         return x[rows]
 
     # ------------------------------------------------------------------ spatial ops
-    def conv(self, x: np.ndarray, conv, radius: int, tick=None) -> np.ndarray:
+    def conv(self, x: np.ndarray, conv, radius: int, tick=None, out=None) -> np.ndarray:
         """k x k x k convolution (a ``runtime.network.Conv``) of rows ``x`` at the rows of
-        ``radius``."""
+        ``radius`` (into ``out``, (rows(radius), C_out), when given)."""
         r_in = self.radius_of(x)
         taps, c_out, n_out = conv.k ** 3, conv.c_out, self.rows(radius)
-        out = np.empty((n_out, c_out), dtype=np.float32)
+        if out is None:
+            out = np.empty((n_out, c_out), dtype=np.float32)
         if c_out <= PROJECT_FIRST_MAX and c_out < x.shape[1]:
             # (R_in k^3, C_out): every row times every tap's weights, then narrow gathers,
             # summed over the taps by a matmul with a 0/1 matrix (faster than a strided sum)
@@ -195,12 +196,14 @@ class Band(BandRows):
         out += conv.bias
         return out
 
-    def snake(self, y: np.ndarray, offsets: np.ndarray, axis: int, radius: int) -> np.ndarray:
+    def snake(self, y: np.ndarray, offsets: np.ndarray, axis: int, radius: int,
+              out=None) -> np.ndarray:
         """Sum over the taps of one snake branch (see ``nn/band_ops.BandOps.snake``).
 
         Args:
             y: (R_in, K b) pre-projected rows; offsets: (rows(radius), 2, K) cumulative lateral
-                offsets, each at most ``margin - 1`` from the tap's lattice line.
+                offsets, each at most ``margin - 1`` from the tap's lattice line; out: where to
+                write the result, when given.
 
         Returns:
             (rows(radius), b) float32.
@@ -212,7 +215,8 @@ class Band(BandRows):
         tap = np.arange(k)
         lat_b, lat_c = lateral_axes(axis)
         n_rows = self.rows(radius)
-        out = np.empty((n_rows, width), dtype=np.float32)
+        if out is None:
+            out = np.empty((n_rows, width), dtype=np.float32)
         # the torus: corners wrapped into one period
         t = self.torus
         corners, weights = snake_corners(self.torus_coords, offsets[:t], axis)

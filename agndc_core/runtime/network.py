@@ -136,9 +136,9 @@ class Network:
         if self.tick is not None:
             self.tick()
 
-    def band_conv(self, ops: Band, x, name: str, radius: int, act: bool = True):
+    def band_conv(self, ops: Band, x, name: str, radius: int, act: bool = True, out=None):
         self._tick()
-        out = ops.conv(x, self.conv(name), radius, self.tick)
+        out = ops.conv(x, self.conv(name), radius, self.tick, out)
         return self.act(out) if act else out
 
     def layer_norm(self, x: np.ndarray, name: str) -> np.ndarray:
@@ -173,9 +173,11 @@ class Network:
     def dsconv(self, ops: Band, x, prefix: str, radius: int):
         """Dynamic snake convolution (``nn/snake.py``): a plain branch and three snakes."""
         cfg = self.config
-        k = cfg.snake_kernel
-        plain = self.band_conv(ops, x, prefix + ".plain", radius)
-        branches = [plain]
+        k, b = cfg.snake_kernel, cfg.snake_width
+        # the fused layer's input [plain | snake x | snake y | snake z], b channels each, every
+        # branch written straight into its columns (no per-branch arrays and concatenated copy)
+        branches = np.empty((ops.rows(radius), 4 * b), dtype=np.float32)
+        plain = self.band_conv(ops, x, prefix + ".plain", radius, out=branches[:, :b])
         for axis in range(3):
             self._tick()
             # (R, 2, K) cumulative lateral offsets of this snake's taps: one axis at a time,
@@ -183,8 +185,9 @@ class Network:
             drift = self.offset_rows(prefix + ".offset", axis)(plain).reshape(-1, 2, k)
             offsets = snake_offsets(drift, cfg.snake_scope)
             taps = self.linear(f"{prefix}.taps.{axis}")(x)
-            branches.append(self.act(ops.snake(taps, offsets, axis, radius)))
-        return self.act(self.linear(prefix + ".fuse")(np.concatenate(branches, -1)))
+            columns = branches[:, (axis + 1) * b:(axis + 2) * b]
+            self.act(ops.snake(taps, offsets, axis, radius, out=columns))
+        return self.act(self.linear(prefix + ".fuse")(branches))
 
     def lwsa(self, ops: Band, f, prefix: str, radius: int):
         """Local window self-attention (``nn/attention.py``) -> (R, 1) map A_s."""

@@ -17,6 +17,17 @@ def add_train_parser(sub) -> None:
                    "side, drawn log-uniform (default 32,128)")
     p.set_defaults(func=_cmd_data)
 
+    p = sub.add_parser("distil-data", help="copy training samples with a teacher network's "
+                       "finest vertices as their labels (training a cheaper student)")
+    p.add_argument("--data", type=Path, required=True, help="folder from `agndc train-data`")
+    p.add_argument("-o", "--out", type=Path, required=True)
+    p.add_argument("--teacher", type=Path, default=None,
+                   help="checkpoint (.safetensors); default: the shipped AGNDC")
+    p.add_argument("--weight", type=float, default=1.0, help="share of the teacher's vertex "
+                   "in the label, 0..1 (the rest is the true vertex)")
+    p.add_argument("--threads", type=int, default=1)
+    p.set_defaults(func=_cmd_distil)
+
     p = sub.add_parser("train", help="train the AGNDC cascade (or the UNDC baseline) per scale")
     p.add_argument("--data", type=Path, required=True, help="folder from `agndc train-data`")
     p.add_argument("--val", type=Path, help="held-out samples for CD/F1 at the end")
@@ -81,6 +92,16 @@ def _cmd_data(args) -> int:
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds)
     print(f"{len(paths)} samples in {args.out}")
+    return 0
+
+
+def _cmd_distil(args) -> int:
+    from ..checkpoint import default_checkpoint_path
+    from .distil import distil_dataset
+
+    teacher = args.teacher or default_checkpoint_path("agndc")
+    paths = distil_dataset(args.data, args.out, teacher, args.weight, args.threads)
+    print(f"{len(paths)} samples in {args.out}, finest vertices {args.weight:g} x {teacher.name}")
     return 0
 
 

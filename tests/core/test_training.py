@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from agndc_core.errors import AGNDCError
 from agndc_core.grid import occupancy_pyramid as sample_pyramid
 from agndc_core.training import train as train_module
 from agndc_core.training.crops import SparseSample, make_crop, random_crop_origin, take, valid_cells
@@ -593,3 +594,29 @@ def test_dataset_resolution_range(tmp_path, capsys):
     assert not (tmp_path / "c").exists()
     with pytest.raises(AGNDCError, match="lo <= hi"):
         build_dataset(tmp_path / "d", 1, resolution_range=(64, 32), progress=False)
+
+
+@pytest.mark.slow
+def test_distilled_samples_take_the_teachers_finest_vertices(data_dir, tmp_path):
+    """distil-data: on surface cells vertex0 is the mix of the true and the teacher's vertex
+    (the teacher run as remesh runs it); everything else of a sample is unchanged."""
+    from agndc_core.checkpoint import default_checkpoint_path
+    from agndc_core.inference import predict_lattice
+    from agndc_core.pipeline import load_model
+    from agndc_core.training.distil import distil_dataset
+
+    teacher = default_checkpoint_path("agndc")
+    paths = distil_dataset(data_dir, tmp_path / "half", teacher, weight=0.5, progress=False)
+    assert [p.name for p in paths] == sorted(p.name for p in Path(data_dir).glob("*.npz"))
+    source, distilled = load_sample(Path(data_dir) / paths[0].name), load_sample(paths[0])
+    predicted, _ = predict_lattice(load_model(teacher), source["lattice"], edges=False)
+    surface = source["surface0"]
+    expected = 0.5 * source["vertex0"][surface] + 0.5 * predicted[surface]
+    np.testing.assert_allclose(distilled["vertex0"][surface], expected, atol=1e-6)
+    assert np.abs(distilled["vertex0"][surface] - source["vertex0"][surface]).max() > 0.05
+    for key in source:
+        if key not in ("vertex0", "recipe"):
+            np.testing.assert_array_equal(distilled[key], source[key], err_msg=key)
+    np.testing.assert_array_equal(distilled["vertex0"][~surface], source["vertex0"][~surface])
+    with pytest.raises(AGNDCError, match="teacher weight"):
+        distil_dataset(data_dir, tmp_path / "bad", teacher, weight=1.5, progress=False)
