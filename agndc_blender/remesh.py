@@ -475,14 +475,15 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
     noise = None
     if settings.distance and job.vertices is not None:
         progress(0.9, "sampling noise of the distance")
-        noise = float(metrics.evaluate(job.vertices, job.faces, job.vertices, job.faces,
-                                       n_samples=DISTANCE_SAMPLES, seed=1)["cd"])
+        noise = metrics.chamfer_distance(job.vertices, job.faces, job.vertices, job.faces,
+                                         n_samples=DISTANCE_SAMPLES, seed=1, check=check_cancel)
     for output in outputs:
         check_cancel()
         if settings.distance and job.vertices is not None:
             progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
-            output.cd = float(metrics.evaluate(output.vertices, output.faces, job.vertices,
-                                               job.faces, n_samples=DISTANCE_SAMPLES)["cd"])
+            output.cd = metrics.chamfer_distance(output.vertices, output.faces, job.vertices,
+                                                 job.faces, n_samples=DISTANCE_SAMPLES,
+                                                 check=check_cancel)
             output.cd_noise = noise
         if job.face_materials is not None and len(output.faces):
             centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)

@@ -102,13 +102,16 @@ def binary_visible_vertex(vertex: np.ndarray, quadric: np.ndarray,
     return np.where(axis_aligned, midpoints, vertex).astype(np.float32)
 
 
-def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[ScaleLabels]:
+def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
+                check=None) -> list[ScaleLabels]:
     """Labels of scales 0..levels for a mesh voxelised into ``grid``.
 
     Args:
         vertices: (V, 3) float world coordinates; faces: (F, 3) int.
         grid: the voxel grid (its affine places the lattice in world space).
         levels: number of coarser scales (the paper's j).
+        check: called between the steps (and inside the ray casting), e.g. raises
+            ``CancelledError`` when a run is cancelled.
 
     Returns:
         list of ScaleLabels, index = scale; scale s has lattice shape D0 / 2**s.
@@ -123,11 +126,13 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2) -> list[Scale
         offset, spacing = scale_lattice(level)
         dims = tuple(int(d) for d in dims0 // 2**level)
         frame = (fine - offset) / spacing
-        inside = inside_points(frame[faces], dims, rule=rule)
+        inside = inside_points(frame[faces], dims, rule=rule, check=check)
         edge = crossed_edges(inside)
         surface = surface_cells(edge)
         # sampled per scale, so coarse cells get the same sample density as fine ones
         points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL)
+        if check is not None:
+            check()
         vertex, quadric = cell_vertices(points, normals, surface, frame, faces)
         labels.append(ScaleLabels(inside, edge, surface, vertex, quadric))
     return labels

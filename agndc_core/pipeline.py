@@ -281,7 +281,7 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
     progress = options.get("progress")
     stages = _Stages(progress, options.get("cancel"))
     grid = stages.run("voxelise", 0.0, voxelize, vertices, faces, resolution, shift=shift,
-                      source=source)
+                      source=source, check=stages.check)
     # progress shares, measured at 64³-128³ (1 thread): the exact intersections take ~85 % of
     # "sharp", the network ~99 % of "agndc"; MC is over in a tenth of a second either way
     share = 0.05
@@ -289,7 +289,7 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
         from .labels import make_labels
 
         options["labels"] = stages.run("exact intersections", 0.05, make_labels, vertices, faces,
-                                       grid, levels=0)
+                                       grid, levels=0, check=stages.check)
         share = 0.8
     options["progress"] = subrange(progress, share, 1.0)
     # a voxelised mesh is framed exactly as the training data were (voxelize + pad_to_lattice

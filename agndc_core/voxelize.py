@@ -27,7 +27,7 @@ RULES = ("auto", "winding", "parity")
 
 
 def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: str = "auto",
-             shift=(0.0, 0.0, 0.0), source: str = "mesh") -> VoxelGrid:
+             shift=(0.0, 0.0, 0.0), source: str = "mesh", check=None) -> VoxelGrid:
     """Voxelise a triangle mesh into a binary grid.
 
     Args:
@@ -39,6 +39,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
         rule: "auto", "winding" or "parity" (see module docstring).
         shift: (3,) sub-voxel offset of the grid, in voxels (training augmentation: the same shape
             seen at different positions relative to the voxel centres).
+        check: called between chunks of the work (``inside_points``): a cancelled run stops
+            within a fraction of a second even on a million triangles.
 
     Returns:
         VoxelGrid whose voxel centres are the sample points; voxel size is the same on all axes;
@@ -54,7 +56,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
     origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
-    occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule))
+    occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule),
+                              check=check)
     return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source,
                                   source_bounds=np.stack([lo, hi]))
 
@@ -101,7 +104,7 @@ def checked_surface(vertices, faces, source: str = "mesh"):
 
 
 def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
-                  rule: str = "winding") -> np.ndarray:
+                  rule: str = "winding", check=None) -> np.ndarray:
     """Inside/outside of the integer points of a box, by voting rays along x, y and z.
 
     Args:
@@ -109,6 +112,8 @@ def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
             integer points (i, j, k), 0 <= i < dims[0] etc.
         dims: (3,) number of points per axis.
         rule: "winding" (non-zero rule) or "parity".
+        check: called between chunks of the ray casting (e.g. raises ``CancelledError`` when a
+            run is cancelled).
 
     Returns:
         (dims) bool.
@@ -121,7 +126,7 @@ def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
     triangles = np.asarray(triangles_fx3x3, dtype=np.float64) - jitter
     votes = np.zeros(dims, dtype=np.uint8)
     for axis in range(3):
-        votes += _inside_along_axis(triangles, dims, axis, rule)
+        votes += _inside_along_axis(triangles, dims, axis, rule, check)
     return votes >= 2
 
 
@@ -142,8 +147,14 @@ def _choose_rule(faces: np.ndarray, rule: str) -> str:
     return "winding" if paired else "parity"
 
 
-def _column_hits(triangles: np.ndarray, dims, axis: int):
-    """Every (triangle, lattice column) pair where the column's ray hits the triangle.
+#: (triangle, column) candidate pairs per chunk of the ray casting: bounds the temporaries
+#: (~150 bytes a pair) and the time between two cancellation checks (~0.2 s on one core)
+PAIR_CHUNK = 1 << 21
+
+
+def _column_hits(triangles: np.ndarray, dims, axis: int, check=None):
+    """Every (triangle, lattice column) pair where the column's ray hits the triangle, in
+    chunks of ``PAIR_CHUNK`` candidate pairs (``check()`` before each).
 
     Returns:
         column_b, column_c: (H,) int column coordinates on the two other axes.
@@ -151,12 +162,32 @@ def _column_hits(triangles: np.ndarray, dims, axis: int):
         facing: (H,) int8 +1 where the triangle faces +axis, -1 where it faces -axis.
     """
     b, c = (axis + 1) % 3, (axis + 2) % 3
-    tb, tc, ta = triangles[:, :, b], triangles[:, :, c], triangles[:, :, axis]
+    tb, tc = triangles[:, :, b], triangles[:, :, c]
     b_lo = np.clip(np.ceil(tb.min(1)), 0, dims[b]).astype(np.int64)
     b_hi = np.clip(np.floor(tb.max(1)), -1, dims[b] - 1).astype(np.int64)
     c_lo = np.clip(np.ceil(tc.min(1)), 0, dims[c]).astype(np.int64)
     c_hi = np.clip(np.floor(tc.max(1)), -1, dims[c] - 1).astype(np.int64)
     n_b, n_c = np.maximum(b_hi - b_lo + 1, 0), np.maximum(c_hi - c_lo + 1, 0)
+    ends = np.cumsum(n_b * n_c)  # candidate pairs up to and including each triangle
+    total = int(ends[-1]) if len(ends) else 0
+    cuts = np.searchsorted(ends, np.arange(PAIR_CHUNK, total, PAIR_CHUNK), side="left") + 1
+    bounds = np.unique(np.concatenate([[0], cuts, [len(triangles)]]))
+    parts = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        if check is not None:
+            check()
+        parts.append(_chunk_hits(triangles[lo:hi], axis, b_lo[lo:hi], c_lo[lo:hi],
+                                 n_b[lo:hi], n_c[lo:hi]))
+    if not parts:
+        empty = np.zeros(0, dtype=np.int64)
+        return empty, empty, np.zeros(0), np.zeros(0, dtype=np.int8)
+    return tuple(np.concatenate(arrays) for arrays in zip(*parts))
+
+
+def _chunk_hits(triangles, axis, b_lo, c_lo, n_b, n_c):
+    """``_column_hits`` of a chunk of triangles, given their projected column boxes."""
+    b, c = (axis + 1) % 3, (axis + 2) % 3
+    tb, tc, ta = triangles[:, :, b], triangles[:, :, c], triangles[:, :, axis]
     per_triangle = n_b * n_c
     # enumerate the columns inside each triangle's projected bounding box
     tri = np.repeat(np.arange(len(triangles)), per_triangle)
@@ -178,11 +209,12 @@ def _column_hits(triangles: np.ndarray, dims, axis: int):
     return col_b, col_c, depth, facing
 
 
-def _inside_along_axis(triangles: np.ndarray, dims, axis: int, rule: str) -> np.ndarray:
+def _inside_along_axis(triangles: np.ndarray, dims, axis: int, rule: str,
+                       check=None) -> np.ndarray:
     """(dims) uint8 verdict (0/1) of the rays cast along +axis."""
     b, c = (axis + 1) % 3, (axis + 2) % 3
     n_a = dims[axis]
-    col_b, col_c, depth, facing = _column_hits(triangles, dims, axis)
+    col_b, col_c, depth, facing = _column_hits(triangles, dims, axis, check)
     # a crossing at depth t lies below every point with coordinate > t: index floor(t) + 1 onwards
     start = np.clip(np.floor(depth).astype(np.int64) + 1, 0, n_a)
     flat = (col_b * dims[c] + col_c) * (n_a + 1) + start

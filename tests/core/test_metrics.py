@@ -215,3 +215,16 @@ def test_format_row_and_summarize():
     assert s["cd"] == pytest.approx(2e-5) and s["f1"] == pytest.approx(0.7)
     assert s["ecd"] == pytest.approx(0.02)  # NaN rows skipped
     assert math.isnan(M.summarize([{"ef1": math.nan}])["ef1"])
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.02])
+def test_chamfer_distance_alone_is_evaluates_cd_and_checks_between_steps(cube, sphere, offset):
+    pred = trimesh.Trimesh(sphere.vertices * 0.9 + [offset, 0, 0], sphere.faces)
+    calls = []
+    cd = M.chamfer_distance(pred.vertices, pred.faces, cube.vertices, cube.faces,
+                            n_samples=N_FAST, seed=3, check=lambda: calls.append(1))
+    full = M.evaluate(pred.vertices, pred.faces, cube.vertices, cube.faces, n_samples=N_FAST,
+                      seed=3)
+    assert cd == full["cd"] > 0 and len(calls) == 2
+    assert M.chamfer_distance(np.eye(3), np.zeros((0, 3), int), cube.vertices, cube.faces,
+                              n_samples=N_FAST) == math.inf

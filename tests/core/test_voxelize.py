@@ -76,3 +76,25 @@ def test_matches_trimesh_contains_on_a_small_grid():
     points = grid.index_to_world(np.argwhere(np.ones(grid.shape, bool)))
     reference = mesh.contains(points).reshape(grid.shape)
     assert (reference != grid.occupancy).sum() <= 2  # points on the surface may differ
+
+
+@pytest.mark.parametrize("rule", ["winding", "parity"])
+def test_ray_casting_in_chunks_gives_the_same_grid_and_checks_between_them(monkeypatch, rule):
+    """The candidate (triangle, column) pairs are cast in chunks, with ``check`` called before
+    each: any chunk size gives the same occupancy, and a check that raises stops the work."""
+    from agndc_core import voxelize as module
+
+    mesh = cylinder_with_hole()
+    whole = voxelize(mesh.vertices, mesh.faces, 48, rule=rule).occupancy
+    monkeypatch.setattr(module, "PAIR_CHUNK", 257)
+    calls = []
+    chunked = voxelize(mesh.vertices, mesh.faces, 48, rule=rule,
+                       check=lambda: calls.append(1)).occupancy
+    np.testing.assert_array_equal(chunked, whole)
+    assert len(calls) > 3 * 10  # several chunks per axis
+
+    def cancel():
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        voxelize(mesh.vertices, mesh.faces, 48, check=cancel)
