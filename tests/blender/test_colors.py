@@ -80,3 +80,24 @@ def test_file_palette_and_colours_off(addon, tmp_path):
                                           colors=False) == {"FINISHED"}
     obj = bpy.data.objects["tinted_MC"]  # replaced by the uncoloured import
     assert len(obj.data.materials) == 0
+
+
+def test_cli_glb_imports_into_blender_with_its_colours(addon, tmp_path):
+    """What ``agndc remesh castle.vox castle.glb`` writes, read by Blender's own glTF importer:
+    one object per colour, each with its material's base colour."""
+    from agndc_core.cli import main
+    from agndc_core.colors import srgb_to_linear
+    from agndc_core.formats.vox_palette import default_palette
+
+    path = tmp_path / "castle.vox"
+    _coloured_vox(path)
+    assert main(["remesh", str(path), "-o", str(tmp_path / "castle.glb"), "--method", "mc"]) == 0
+    assert bpy.ops.import_scene.gltf(filepath=str(tmp_path / "castle.glb")) == {"FINISHED"}
+    palette = default_palette()
+    for index in (RED, BLUE):
+        material = bpy.data.materials[f"vox_{bytes(palette[index][:3]).hex()}"]
+        np.testing.assert_allclose(_base_color(material), srgb_to_linear(palette[index]),
+                                   atol=1e-6)
+        users = [o for o in bpy.data.objects if o.type == "MESH"
+                 and material.name in [m.name for m in o.data.materials]]
+        assert len(users) == 1 and len(users[0].data.polygons) > 50
