@@ -225,3 +225,20 @@ def test_cli_writes_colours_unless_told_not_to(tmp_path, capsys):
     plain = tmp_path / "plain.obj"
     assert main(["remesh", str(source), "-o", str(plain), "--method", "mc", "--no-colors"]) == 0
     assert (tmp_path / "box.obj").read_bytes() == plain.read_bytes()  # .obj: geometry only
+
+
+def test_voxel_house_keeps_every_colour_on_a_closed_agndc_mesh():
+    """The docs' six-colour house (study/voxel_art.py): every colour reaches the AGNDC mesh,
+    which stays closed, and the door's faces are the door's colour."""
+    from agndc_core.study.voxel_art import HOUSE_COLORS, house
+
+    grid = house()
+    result = remesh(grid, method="agndc")
+    assert not any(topology_violations(result.vertices, result.faces).values())
+    index = face_colors(result.vertices, result.faces, grid)
+    assert set(index.tolist()) == set(HOUSE_COLORS)
+    centre = grid.world_to_index(result.vertices[result.faces].mean(axis=1))  # (F, 3)
+    # the door: voxels x 10..13, z 2..8 of the front wall's outer layer (y = 4)
+    door = (centre[:, 1] < 4.0) & (np.abs(centre[:, 0] - 11.5) < 1.2) & (centre[:, 2] > 3) \
+        & (centre[:, 2] < 7.5)
+    assert door.sum() >= 10 and np.all(index[door] == 3)
