@@ -242,3 +242,16 @@ def test_voxel_house_keeps_every_colour_on_a_closed_agndc_mesh():
     door = (centre[:, 1] < 4.0) & (np.abs(centre[:, 0] - 11.5) < 1.2) & (centre[:, 2] > 3) \
         & (centre[:, 2] < 7.5)
     assert door.sum() >= 10 and np.all(index[door] == 3)
+
+
+def test_batch_writes_the_colours_of_vox_inputs(tmp_path):
+    from agndc_core import batch
+
+    indices = two_colour_box()
+    (tmp_path / "box.vox").write_bytes(write_vox(indices != 0, "box.vox", colors=indices))
+    out = tmp_path / "out"
+    (row,) = batch.remesh_many([tmp_path / "box.vox"], out, method="mc", workers=1)
+    assert row["status"] == "ok"
+    mesh = trimesh.load(out / "box.ply", process=False)
+    colours = {tuple(c) for c in mesh.visual.face_colors.tolist()}
+    assert colours == {tuple(default_palette()[RED]), tuple(default_palette()[BLUE])}
