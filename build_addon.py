@@ -91,7 +91,7 @@ PRODUCT_MODULES = (
     "labels.py", "methods.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
     "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
-    "batch_job.py", "batch_dask.py", "formats", "runtime", "weights",
+    "batch_job.py", "batch_dask.py", "colors.py", "formats", "runtime", "weights",
     "nn/__init__.py", "nn/config.py", "nn/layout.py",
 )
 

@@ -53,6 +53,24 @@ def new_mesh(name: str, vertices: np.ndarray, faces: np.ndarray,
     return mesh
 
 
+def color_material(name: str, rgba) -> "bpy.types.Material":
+    """The material ``name``, created when missing with a Principled BSDF of base colour ``rgba``
+    (4 floats, linear) and the same viewport colour (Solid shading); an existing one is reused
+    as it is, so a material the user edited keeps the edits."""
+    material = bpy.data.materials.get(name)
+    if material is not None:
+        return material
+    material = bpy.data.materials.new(name)
+    material.diffuse_color = rgba
+    material.use_nodes = True
+    shader = next((node for node in material.node_tree.nodes
+                   if node.type == "BSDF_PRINCIPLED"), None)
+    if shader is not None:
+        shader.inputs["Base Color"].default_value = rgba
+        shader.inputs["Roughness"].default_value = 1.0
+    return material
+
+
 def mesh_arrays(mesh, materials: bool = False):
     """(V, 3) float64 vertices and (F, 3) int64 triangles (n-gons triangulated) of a mesh, and
     with ``materials`` the (F,) int32 material slot of each triangle."""

@@ -173,7 +173,7 @@ class _RemeshOperatorMixin:
             use_modifiers=values.get("use_modifiers", True),
             replace_source=values.get("output") == "REPLACE",
             checkpoint=(prefs.checkpoint or None) if prefs is not None else None,
-            model_index=self._model_index(remesh))
+            model_index=self._model_index(remesh), colors=getattr(self, "colors", True))
 
     def _model_index(self, remesh) -> int:
         return 0
@@ -367,6 +367,9 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
     model_index: IntProperty(name="Model Index", description="Which model of a .vox file "
                              "(0 = the first)", default=0, min=0, max=10_000,
                              options={"SKIP_SAVE"})
+    colors: BoolProperty(name="Voxel Colors", default=True,
+                         description="Coloured grids (MagicaVoxel .vox): one material per "
+                         "palette color, each face colored by the nearest voxel")
     use_modal: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
     # set on the second call of a long import: ask (invoke) or run (execute) without asking again
     confirm: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
@@ -460,6 +463,7 @@ def draw_settings(layout, data, mesh: bool) -> None:
         col.prop(data, "vox_models")
         if data.vox_models == "INDEX":
             col.prop(data, "model_index")
+        col.prop(data, "colors")
     sub = col.column()
     sub.active = data.method != "mc" and not (mesh and data.output == "REPLACE")
     sub.prop(data, "compare_mc")

@@ -15,7 +15,9 @@ Conventions: a mesh is remeshed as shown (modifiers applied) unless ``use_modifi
 is voxelised along its own axes with a voxel size in world units (the object's scale included);
 results keep the source's transform, parent, materials (per face, from the nearest source face)
 and sit beside it along its X axis where they overlap no other object (``plan.free_offset``), or
-replace it (``replace_source``: the source is hidden, not deleted). ``remesh_object`` and
+replace it (``replace_source``: the source is hidden, not deleted). A coloured grid (.vox) gives
+one material per palette colour its faces use (``vox_rrggbb``, shared by name), each face
+coloured by the nearest source voxel (``colors.face_colors``). ``remesh_object`` and
 ``import_grid`` chain the three steps for one input and raise its error.
 """
 
@@ -33,7 +35,7 @@ from mathutils import Matrix
 
 from . import mesh_io
 from ._core import checkpoint as checkpoint_module
-from ._core import errors, gridio, metrics, pipeline, plan, voxelize
+from ._core import colors, errors, gridio, metrics, pipeline, plan, voxelize
 from ._core import methods as registry
 
 #: collection that receives the results placed beside their sources
@@ -75,6 +77,7 @@ class Settings:
     use_modifiers: bool = True  # the evaluated mesh (modifiers applied); False: the base mesh
     replace_source: bool = False  # the result takes the source's place, the source is hidden
     model_index: int = 0  # .vox files: which model; ALL_MODELS = each model as an object
+    colors: bool = True  # coloured grids (.vox): one material per used palette colour
 
     def methods(self) -> list[str]:
         """The methods each input is reconstructed with (the result, then MC to compare)."""
@@ -111,6 +114,8 @@ class Output:
     # twice this are sampling noise, not the method
     cd_noise: float | None = None
     materials: np.ndarray | None = None  # (F,) int32 material slot per face
+    # coloured grids: (material name, (4,) linear RGBA) of each palette colour's slot, in order
+    color_materials: list = field(default_factory=list)
 
 
 @dataclass
@@ -472,6 +477,10 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         results.append(pipeline.remesh(first.grid, method="mc", cancel=cancel,
                                        progress=sub(progress, main_share, 0.9)))
     outputs = [Output(r.method, r.vertices, r.faces, r.seconds) for r in results]
+    if settings.colors and results[0].grid is not None and results[0].grid.colors is not None:
+        progress(0.9, "voxel colours")
+        for output in outputs:
+            _color_output(output, results[0].grid)
     noise = None
     if settings.distance and job.vertices is not None:
         progress(0.9, "sampling noise of the distance")
@@ -492,6 +501,19 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         output.vertices = output.vertices / job.frame  # back to the object's local coordinates
     progress(1.0, "done")
     return outputs
+
+
+def _color_output(output: Output, grid) -> None:
+    """One material slot per palette colour the faces use, each face in the slot of the nearest
+    source voxel's colour (``colors.face_colors``; world = grid coordinates here)."""
+    if not len(output.faces):
+        return
+    used, output.materials = colors.material_slots(
+        colors.face_colors(output.vertices, output.faces, grid))
+    palette = grid.colors.palette
+    output.color_materials = [(colors.material_name(palette[index]),
+                               tuple(colors.srgb_to_linear(palette[index]).tolist()))
+                              for index in used]
 
 
 # --------------------------------------------------------------------------- step 3: apply
@@ -565,6 +587,8 @@ def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupi
     for material_name, link in job.material_slots:
         material = bpy.data.materials.get(material_name) if material_name else None
         mesh.materials.append(material if link == "DATA" else None)
+    for material_name, rgba in out.color_materials:
+        mesh.materials.append(mesh_io.color_material(material_name, rgba))
     obj = bpy.data.objects.new(name, mesh)
     for slot, (material_name, link) in zip(obj.material_slots, job.material_slots):
         if link == "OBJECT":

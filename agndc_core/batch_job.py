@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .colors import result_colors
 from .errors import AGNDCError
 from .gridio import save_mesh
 from .pipeline import MESH_ONLY_METHODS, remesh, remesh_file
@@ -65,7 +66,7 @@ def run_job(job: Job, options: BatchOptions) -> dict:
                              normal_filter=options.normal_filter,
                              source_bounds=options.source_bounds)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
-        save_mesh(result.vertices, result.faces, job.output)
+        save_mesh(result.vertices, result.faces, job.output, **result_colors(result))
         row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),
                    vertices=len(result.vertices), status="ok", error="")
     except AGNDCError as exc:

@@ -47,6 +47,10 @@ def _parser() -> argparse.ArgumentParser:
                    help="; ".join(f"{m.name}: {m.description}" for m in REGISTRY))
     _add_remesh_options(p)
     p.add_argument("--threads", type=int, help="CPU threads for the network")
+    p.add_argument("--no-colors", dest="colors", action="store_false",
+                   help="coloured grids (.vox): write plain geometry (by default each face "
+                   "takes the colour of the nearest voxel: .glb one material per colour, .ply "
+                   "face colours; .obj and .stl are always plain)")
     p.set_defaults(func=_cmd_remesh)
 
     p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
@@ -160,6 +164,7 @@ def _progress_bar(desc: str):
 
 
 def _cmd_remesh(args) -> int:
+    from .colors import result_colors
     from .gridio import save_mesh
     from .pipeline import remesh_file
 
@@ -175,9 +180,11 @@ def _cmd_remesh(args) -> int:
                              source_bounds=args.source_bounds)
     finally:
         bar.close()
-    save_mesh(result.vertices, result.faces, args.output)
+    colors = result_colors(result) if args.colors else {}
+    save_mesh(result.vertices, result.faces, args.output, **colors)
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
-    print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces, "
+    used = f", {len(set(colors['face_colors'].tolist()))} colours" if colors else ""
+    print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces{used}, "
           f"{result.method}, {result.seconds:.2f} s ({stages})")
     return 0
 

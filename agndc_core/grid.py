@@ -25,10 +25,14 @@ Convention (everything else in the package follows it)
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import GridError
+
+if TYPE_CHECKING:
+    from .colors import VoxelColors
 
 LATTICE_PAD = 1  # empty layers added on the low side before contouring
 #: the lattice is always padded for a cascade this deep (the paper's j = 2), whatever the method,
@@ -63,12 +67,15 @@ class VoxelGrid:
             as a grid. The grid alone cannot tell where an axis-aligned face lies inside its
             layer of voxels; for the faces that bound the mesh, these six numbers can
             (``flatpatches.snap_to_bounds``).
+        colors: the palette index of each voxel and the palette (``colors.VoxelColors``, same
+            shape as ``occupancy``), for a grid read from a coloured format (.vox); else None.
     """
 
     occupancy: np.ndarray
     affine: np.ndarray = field(default_factory=lambda: np.eye(4))
     source: str = "array"
     source_bounds: np.ndarray | None = None
+    colors: VoxelColors | None = None
 
     def __post_init__(self) -> None:
         self.occupancy = as_occupancy(self.occupancy, name=self.source)
@@ -86,6 +93,9 @@ class VoxelGrid:
                 raise GridError(f"{self.source}: source_bounds must be finite (min, max) corners "
                                 f"of shape (2, 3), got {bounds.tolist()}")
             self.source_bounds = bounds
+        if self.colors is not None and self.colors.indices.shape != self.occupancy.shape:
+            raise GridError(f"{self.source}: colour indices {self.colors.indices.shape} do not "
+                            f"match the grid {self.occupancy.shape}")
 
     @classmethod
     def from_spacing(cls, occupancy, voxel_size=1.0, origin=(0.0, 0.0, 0.0), source="array",

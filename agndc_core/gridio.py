@@ -39,7 +39,7 @@ import numpy as np
 
 from .errors import AGNDCError, GridFileError
 from .formats.binvox import guard_size, read_binvox, write_binvox
-from .formats.vox import count_vox_models, read_vox, write_vox
+from .formats.vox import count_vox_models, read_vox_colors, write_vox
 from .grid import MAX_VOXELS, VoxelGrid
 from .voxelize import check_mesh
 
@@ -82,6 +82,7 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
     -------
     VoxelGrid
         (X, Y, Z) bool occupancy and its 4x4 affine; ``source`` is the file name. Empty grids load.
+        A ``.vox`` grid also carries its voxels' palette indices and palette (``colors``).
 
     Raises
     ------
@@ -102,7 +103,10 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
         occupancy, affine = read_binvox(_read_bytes(path), name)
         return VoxelGrid(occupancy, affine, source=name)
     if ext == ".vox":
-        return VoxelGrid(read_vox(_read_bytes(path), name, model_index), source=name)
+        from .colors import VoxelColors
+
+        indices, palette = read_vox_colors(_read_bytes(path), name, model_index)
+        return VoxelGrid(indices != 0, source=name, colors=VoxelColors(indices, palette))
     return _read_nifti(path)
 
 
@@ -122,9 +126,10 @@ def grid_model_count(path) -> int:
 def save_grid(grid: VoxelGrid, path) -> None:
     """Write ``grid`` to ``path``, in the format its extension names.
 
-    ``.npy`` and ``.vox`` store the occupancy only (placement is lost); ``.npz`` and NIfTI keep
-    the full affine; ``.binvox`` needs an axis-aligned isotropic affine and ``.vox`` at most 256
-    voxels per axis, otherwise a GridFileError says so.
+    ``.npy`` and ``.vox`` store the occupancy only (placement is lost; ``.vox`` keeps the grid's
+    ``colors`` when it has them); ``.npz`` and NIfTI keep the full affine; ``.binvox`` needs an
+    axis-aligned isotropic affine and ``.vox`` at most 256 voxels per axis, otherwise a
+    GridFileError says so.
     """
     path = Path(path)
     ext = _require_extension(path, GRID_EXTENSIONS, "grid")
@@ -139,7 +144,9 @@ def save_grid(grid: VoxelGrid, path) -> None:
     elif ext == ".binvox":
         data = write_binvox(occupancy, grid.affine, name)
     elif ext == ".vox":
-        data = write_vox(occupancy, name)
+        colors = grid.colors
+        data = write_vox(occupancy, name, colors=None if colors is None else colors.indices,
+                         palette=None if colors is None else colors.palette)
     else:
         data = _nifti_bytes(grid, gzipped=ext == ".nii.gz")
     _write_bytes(path, data)
@@ -202,7 +209,7 @@ def _require_stl_layout(path: Path) -> None:
                             "does not match its triangle count) nor an ASCII STL")
 
 
-def save_mesh(vertices, faces, path) -> None:
+def save_mesh(vertices, faces, path, *, face_colors=None, palette=None) -> None:
     """Write a triangle mesh, keeping the vertex order (no merging or reordering).
 
     Parameters
@@ -211,14 +218,24 @@ def save_mesh(vertices, faces, path) -> None:
     faces : (F, 3) int
     path : str or Path
         ``.obj``, ``.ply``, ``.stl`` or ``.glb``.
+    face_colors : (F,) uint8, optional
+        Palette index of each face, with ``palette`` (256, 4) uint8 sRGB(A): ``.glb`` gets one
+        material per used colour, ``.ply`` face colours (``colors.colored_mesh_bytes``);
+        ``.obj`` and ``.stl`` stay plain geometry.
     """
     import trimesh
 
     path = Path(path)
     ext = _require_extension(path, MESH_SAVE_EXTENSIONS, "mesh output")
-    mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
-                           np.asarray(faces, dtype=np.int64).reshape(-1, 3), process=False)
-    data = mesh.export(file_type=ext[1:])
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    data = None
+    if face_colors is not None and len(faces):
+        from .colors import colored_mesh_bytes
+
+        data = colored_mesh_bytes(vertices, faces, face_colors, palette, ext[1:])
+    if data is None:
+        data = trimesh.Trimesh(vertices, faces, process=False).export(file_type=ext[1:])
     _write_bytes(path, data.encode("utf-8") if isinstance(data, str) else data)
 
 
