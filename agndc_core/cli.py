@@ -47,6 +47,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="; ".join(f"{m.name}: {m.description}" for m in REGISTRY))
     _add_remesh_options(p)
     p.add_argument("--threads", type=int, help="CPU threads for the network")
+    p.add_argument("--quads", action="store_true",
+                   help=".obj/.ply output of a dual method: join each planar, convex pair of "
+                   "triangles of one dual-contouring quad into a quad, the rest stays "
+                   "triangles (docs/quads.md); .stl/.glb hold triangles only, and marching "
+                   "cubes has no quads")
     p.set_defaults(func=_cmd_remesh)
 
     p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
@@ -175,11 +180,24 @@ def _cmd_remesh(args) -> int:
                              source_bounds=args.source_bounds)
     finally:
         bar.close()
-    save_mesh(result.vertices, result.faces, args.output)
+    polygons = result.polygons() if args.quads else None
+    save_mesh(result.vertices, result.faces, args.output, polygons=polygons)
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
     print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces, "
           f"{result.method}, {result.seconds:.2f} s ({stages})")
+    if polygons is not None:
+        print(_quads_line(polygons, args.output, result.face_quads is None))
     return 0
+
+
+def _quads_line(polygons, output: Path, no_quads: bool) -> str:
+    """What ``--quads`` wrote, or why it wrote triangles."""
+    if no_quads:
+        return "--quads: marching cubes has no quads; triangles written"
+    if output.suffix.lower() not in (".obj", ".ply"):
+        return f"--quads: {output.suffix} holds triangles only; triangles written"
+    return (f"--quads: {len(polygons.quads)} quads and {len(polygons.triangles)} triangles "
+            f"({100 * polygons.quad_fraction:.1f} % quads)")
 
 
 def _cmd_batch(args) -> int:

@@ -202,7 +202,7 @@ def _require_stl_layout(path: Path) -> None:
                             "does not match its triangle count) nor an ASCII STL")
 
 
-def save_mesh(vertices, faces, path) -> None:
+def save_mesh(vertices, faces, path, *, polygons=None) -> None:
     """Write a triangle mesh, keeping the vertex order (no merging or reordering).
 
     Parameters
@@ -211,11 +211,22 @@ def save_mesh(vertices, faces, path) -> None:
     faces : (F, 3) int
     path : str or Path
         ``.obj``, ``.ply``, ``.stl`` or ``.glb``.
+    polygons : quads.QuadMesh, optional
+        The same surface as quads and triangles (``RemeshResult.polygons()``): written instead
+        of ``faces`` to ``.obj`` and ``.ply``; ``.stl`` and ``.glb`` hold triangles only and
+        get ``faces``.
     """
     import trimesh
 
     path = Path(path)
     ext = _require_extension(path, MESH_SAVE_EXTENSIONS, "mesh output")
+    if polygons is not None and ext in (".obj", ".ply"):
+        from .formats.polygons import obj_bytes, ply_bytes
+
+        write = obj_bytes if ext == ".obj" else ply_bytes
+        _write_bytes(path, write(np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
+                                 polygons.quads, polygons.triangles))
+        return
     mesh = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64).reshape(-1, 3),
                            np.asarray(faces, dtype=np.int64).reshape(-1, 3), process=False)
     data = mesh.export(file_type=ext[1:])
