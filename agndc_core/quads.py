@@ -105,9 +105,11 @@ def join_quads(vertices_vx3: np.ndarray, faces_fx3: np.ndarray, face_quads_f: np
 
 
 def triangulate(quads_qx4: np.ndarray) -> np.ndarray:
-    """(2Q, 3) triangles of quads (a, b, c, d): (a, b, c) and (a, c, d), same winding."""
+    """(2Q, 3) triangles of quads (a, b, c, d) along their diagonal b - d: (a, b, d) and
+    (b, c, d), same winding. ``join_quads`` puts the shared diagonal there, so this gives the
+    joined triangles back."""
     quads = np.asarray(quads_qx4, dtype=np.int64).reshape(-1, 4)
-    return np.stack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]], axis=1).reshape(-1, 3)
+    return np.stack([quads[:, [0, 1, 3]], quads[:, [1, 2, 3]]], axis=1).reshape(-1, 3)
 
 
 def polygon_triangles(polygons: QuadMesh) -> np.ndarray:

@@ -1,8 +1,8 @@
 """Writers for meshes of quads and triangles (``quads.QuadMesh``): Wavefront OBJ and binary PLY.
 
-trimesh writes triangles only, so polygon meshes are written here, with the same layout as
-trimesh's triangle files (OBJ: 8 decimals; PLY: binary little endian, float32 vertices, a
-``uchar int`` list per face). Faces are written quads first, then triangles, outward wound.
+trimesh writes triangles only, so polygon meshes are written here, with the precision of
+trimesh's triangle files (8 decimals). Faces are written quads first, then triangles, wound
+outward.
 """
 
 from __future__ import annotations
@@ -25,20 +25,20 @@ def obj_bytes(vertices_vx3: np.ndarray, quads_qx4: np.ndarray, triangles_tx3: np
 
 
 def ply_bytes(vertices_vx3: np.ndarray, quads_qx4: np.ndarray, triangles_tx3: np.ndarray) -> bytes:
-    """A binary little-endian PLY file with one ``vertex_indices`` list (3 or 4) per face."""
-    vertices = np.asarray(vertices_vx3, dtype="<f4").reshape(-1, 3)
-    blocks = [_face_records(quads_qx4, 4), _face_records(triangles_tx3, 3)]
-    header = ("ply\nformat binary_little_endian 1.0\ncomment AGNDC Remesher\n"
+    """An ASCII PLY file with one ``vertex_indices`` list (4 or 3) per face.
+
+    ASCII, not binary: readers that take a binary file's first list length for every face
+    (trimesh's, and so ``gridio.load_mesh``) cannot read binary faces of mixed sizes.
+    """
+    vertices = np.asarray(vertices_vx3, dtype=np.float64).reshape(-1, 3)
+    quads = np.asarray(quads_qx4, dtype=np.int64).reshape(-1, 4)
+    triangles = np.asarray(triangles_tx3, dtype=np.int64).reshape(-1, 3)
+    out = io.StringIO()
+    out.write("ply\nformat ascii 1.0\ncomment AGNDC Remesher: quads and triangles\n"
               f"element vertex {len(vertices)}\nproperty float x\nproperty float y\n"
-              f"property float z\nelement face {sum(len(b) for b in blocks)}\n"
+              f"property float z\nelement face {len(quads) + len(triangles)}\n"
               "property list uchar int vertex_indices\nend_header\n")
-    return header.encode("ascii") + vertices.tobytes() + b"".join(b.tobytes() for b in blocks)
-
-
-def _face_records(polygons: np.ndarray, size: int) -> np.ndarray:
-    """(N,) packed records (count, size indices) of one polygon size."""
-    faces = np.asarray(polygons, dtype=np.int64).reshape(-1, size)
-    records = np.zeros(len(faces), dtype=[("count", "u1"), ("index", "<i4", (size,))])
-    records["count"] = size
-    records["index"] = faces
-    return records
+    np.savetxt(out, vertices, fmt="%.8f %.8f %.8f")
+    np.savetxt(out, quads, fmt="4 %d %d %d %d")
+    np.savetxt(out, triangles, fmt="3 %d %d %d")
+    return out.getvalue().encode("ascii")
