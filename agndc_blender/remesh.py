@@ -69,6 +69,7 @@ class Settings:
     threads: int = 0  # 0 = automatic
     compare_mc: bool = True
     smooth: bool = False
+    quads: bool = False  # dual methods: planar, convex quads where the contouring made them
     checkpoint: str | None = None  # None = the shipped weights
     distance: bool = True  # Chamfer distance of each result to the source mesh
     voxel_size: float = 0.0  # voxel edge in world units; 0 = use ``resolution``
@@ -111,6 +112,7 @@ class Output:
     # twice this are sampling noise, not the method
     cd_noise: float | None = None
     materials: np.ndarray | None = None  # (F,) int32 material slot per face
+    polygons: object = None  # quads.QuadMesh of the same faces (``Settings.quads``)
 
 
 @dataclass
@@ -477,7 +479,7 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         progress(0.9, "sampling noise of the distance")
         noise = float(metrics.evaluate(job.vertices, job.faces, job.vertices, job.faces,
                                        n_samples=DISTANCE_SAMPLES, seed=1)["cd"])
-    for output in outputs:
+    for output, result in zip(outputs, results):
         check_cancel()
         if settings.distance and job.vertices is not None:
             progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
@@ -488,6 +490,8 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
             centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)
             output.materials = plan.nearest_face_values(job.vertices, job.faces,
                                                         job.face_materials, centroids)
+        if settings.quads:  # a quad joins two triangles of one material only
+            output.polygons = result.polygons(groups=output.materials)
         output.vertices = output.vertices / job.frame  # back to the object's local coordinates
     progress(1.0, "done")
     return outputs
@@ -559,7 +563,7 @@ def _remove_previous(job: Job, methods: list[str]) -> set[str]:
 
 def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupied) -> Made:
     name = f"{job.name}_{SUFFIXES[out.method]}"
-    mesh = mesh_io.new_mesh(name, out.vertices, out.faces, out.materials)
+    mesh = mesh_io.new_mesh(name, out.vertices, out.faces, out.materials, out.polygons)
     mesh_io.set_smooth(mesh, settings.smooth)
     for material_name, link in job.material_slots:
         material = bpy.data.materials.get(material_name) if material_name else None
