@@ -124,6 +124,8 @@ def _all_triangles(faces: np.ndarray) -> QuadMesh:
 
 def _quad_pairs(face_quads: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(P,) first and second face of each quad id held by exactly two faces."""
+    if len(face_quads) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
     order = np.argsort(face_quads, kind="stable")
     ids = face_quads[order]
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])  # first of each run of one id

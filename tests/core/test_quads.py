@@ -170,6 +170,12 @@ def test_join_quads_leaves_odd_ids_and_unmarked_faces():
     np.testing.assert_array_equal(out.triangle_faces, np.arange(5))
 
 
+def test_join_quads_of_an_empty_mesh():
+    out = join_quads(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=int))
+    assert out.quads.shape == (0, 4) and out.triangles.shape == (0, 3)
+    assert out.polygon_count == 0 and out.quad_fraction == 0.0
+
+
 def noise_lattice(seed=3, shape=(14, 12, 10)):
     occupancy = np.random.default_rng(seed).random(shape) < 0.3
     return pad_to_lattice(occupancy)
