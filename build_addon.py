@@ -90,6 +90,7 @@ PRODUCT_MODULES = (
     "__init__.py", "py.typed", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py",
     "labels.py", "methods.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
+    "quads.py",
     "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
     "batch_job.py", "batch_dask.py", "colors.py", "formats", "runtime", "weights",
     "nn/__init__.py", "nn/config.py", "nn/layout.py",

@@ -32,20 +32,23 @@ def read_mesh(obj, use_modifiers: bool = True, depsgraph=None):
 
 
 def new_mesh(name: str, vertices: np.ndarray, faces: np.ndarray,
-             materials: np.ndarray | None = None) -> "bpy.types.Mesh":
+             materials: np.ndarray | None = None, polygons=None) -> "bpy.types.Mesh":
     """A new mesh datablock from (V, 3) float vertices and (F, 3) int triangles, with an optional
-    (F,) material slot per triangle."""
+    (F,) material slot per triangle. ``polygons`` (``quads.QuadMesh`` of the same triangles):
+    its quads, then its remaining triangles, become the faces instead."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float32).reshape(-1, 3)
-    faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
+    corners, sizes = _polygon_corners(faces, polygons)  # (L,), (P,)
+    if materials is not None and polygons is not None:
+        materials = np.asarray(materials).reshape(-1)[polygons.polygon_faces()]
     mesh = bpy.data.meshes.new(name)
     mesh.vertices.add(len(vertices))
     mesh.vertices.foreach_set("co", vertices.ravel())
-    mesh.loops.add(faces.size)
-    mesh.loops.foreach_set("vertex_index", faces.ravel())
-    mesh.polygons.add(len(faces))
-    mesh.polygons.foreach_set("loop_start", np.arange(0, faces.size, 3, dtype=np.int32))
-    mesh.polygons.foreach_set("loop_total", np.full(len(faces), 3, dtype=np.int32))
-    if materials is not None and len(faces):
+    mesh.loops.add(corners.size)
+    mesh.loops.foreach_set("vertex_index", corners)
+    mesh.polygons.add(len(sizes))
+    mesh.polygons.foreach_set("loop_start", (np.cumsum(sizes) - sizes).astype(np.int32))
+    mesh.polygons.foreach_set("loop_total", sizes)
+    if materials is not None and len(sizes):
         mesh.polygons.foreach_set("material_index",
                                   np.ascontiguousarray(materials, dtype=np.int32).reshape(-1))
     mesh.update(calc_edges=True)
@@ -69,6 +72,19 @@ def color_material(name: str, rgba) -> "bpy.types.Material":
         shader.inputs["Base Color"].default_value = rgba
         shader.inputs["Roughness"].default_value = 1.0
     return material
+
+
+def _polygon_corners(faces, polygons) -> tuple[np.ndarray, np.ndarray]:
+    """(L,) int32 vertex of each face corner and (P,) int32 corners per face: the triangles, or
+    the quads then the remaining triangles of ``polygons``."""
+    if polygons is None:
+        faces = np.ascontiguousarray(faces, dtype=np.int32).reshape(-1, 3)
+        return faces.ravel(), np.full(len(faces), 3, dtype=np.int32)
+    corners = np.concatenate([np.asarray(polygons.quads).ravel(),
+                              np.asarray(polygons.triangles).ravel()]).astype(np.int32)
+    sizes = np.repeat(np.array([4, 3], dtype=np.int32),
+                      [len(polygons.quads), len(polygons.triangles)])
+    return corners, sizes
 
 
 def mesh_arrays(mesh, materials: bool = False):

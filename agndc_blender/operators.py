@@ -30,6 +30,7 @@ from .properties import (
     method_property,
     normal_filter_property,
     output_property,
+    quads_property,
     resolution_property,
     size_mode_property,
     smooth_property,
@@ -40,7 +41,7 @@ from .properties import (
 
 #: names shared by the operator properties and the scene settings
 SETTING_NAMES = ("size_mode", "voxel_size", "resolution", "method", "normal_filter",
-                 "use_modifiers", "output", "compare_mc", "smooth", "threads")
+                 "use_modifiers", "output", "compare_mc", "quads", "smooth", "threads")
 GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
 GRID_FILTER = ";".join(f"*{ext}" for ext in GRID_EXTENSIONS)
 #: seconds between modal updates (progress bar, status bar, worker check)
@@ -169,7 +170,7 @@ class _RemeshOperatorMixin:
             voxel_size=values["voxel_size"] if values.get("size_mode") == "VOXEL_SIZE" else 0.0,
             method=values["method"], threads=threads,
             normal_filter=values["normal_filter"],
-            compare_mc=values["compare_mc"], smooth=values["smooth"],
+            compare_mc=values["compare_mc"], smooth=values["smooth"], quads=values["quads"],
             use_modifiers=values.get("use_modifiers", True),
             replace_source=values.get("output") == "REPLACE",
             checkpoint=(prefs.checkpoint or None) if prefs is not None else None,
@@ -300,6 +301,7 @@ class OBJECT_OT_agndc_remesh(_RemeshOperatorMixin, bpy.types.Operator):
     use_modifiers: use_modifiers_property(**OPERATOR)
     output: output_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
+    quads: quads_property(**OPERATOR)
     smooth: smooth_property(**OPERATOR)
     threads: threads_property(**OPERATOR)
     use_modal: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
@@ -360,6 +362,7 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
     method: method_property(GRID_METHOD_ITEMS, **OPERATOR)
     normal_filter: normal_filter_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
+    quads: quads_property(**OPERATOR)
     smooth: smooth_property(**OPERATOR)
     threads: threads_property(**OPERATOR)
     vox_models: EnumProperty(name=".vox Models", items=VOX_ITEMS, default="INDEX",
@@ -467,5 +470,8 @@ def draw_settings(layout, data, mesh: bool) -> None:
     sub = col.column()
     sub.active = data.method != "mc" and not (mesh and data.output == "REPLACE")
     sub.prop(data, "compare_mc")
+    quads = col.column()
+    quads.active = data.method != "mc"  # marching cubes makes triangles only
+    quads.prop(data, "quads")
     col.prop(data, "smooth")
     col.prop(data, "threads")

@@ -98,6 +98,15 @@ def normal_filter_property(**extra):
                         default=True, **extra)
 
 
+def quads_property(**extra):
+    return BoolProperty(name="Quads",
+                        description="Make quads, as Voxel Remesh does: each planar, convex pair "
+                        "of triangles of one dual-contouring quad becomes a quad (nearly all "
+                        "faces of boxes and smooth shapes); the rest stays triangles. Marching "
+                        "cubes makes triangles only",
+                        default=False, **extra)
+
+
 def smooth_property(**extra):
     return BoolProperty(name="Smooth Shading", description="Shade the new objects smooth",
                         default=False, **extra)
@@ -124,5 +133,6 @@ class AGNDC_RemeshSettings(bpy.types.PropertyGroup):
     use_modifiers: use_modifiers_property()
     output: output_property()
     compare_mc: compare_mc_property()
+    quads: quads_property()
     smooth: smooth_property()
     threads: threads_property()

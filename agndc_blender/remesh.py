@@ -71,6 +71,7 @@ class Settings:
     threads: int = 0  # 0 = automatic
     compare_mc: bool = True
     smooth: bool = False
+    quads: bool = False  # dual methods: planar, convex quads where the contouring made them
     checkpoint: str | None = None  # None = the shipped weights
     distance: bool = True  # Chamfer distance of each result to the source mesh
     voxel_size: float = 0.0  # voxel edge in world units; 0 = use ``resolution``
@@ -116,6 +117,7 @@ class Output:
     materials: np.ndarray | None = None  # (F,) int32 material slot per face
     # coloured grids: (material name, (4,) linear RGBA) of each palette colour's slot, in order
     color_materials: list = field(default_factory=list)
+    polygons: object = None  # quads.QuadMesh of the same faces (``Settings.quads``)
 
 
 @dataclass
@@ -486,7 +488,7 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         progress(0.9, "sampling noise of the distance")
         noise = metrics.chamfer_distance(job.vertices, job.faces, job.vertices, job.faces,
                                          n_samples=DISTANCE_SAMPLES, seed=1, check=check_cancel)
-    for output in outputs:
+    for output, result in zip(outputs, results):
         check_cancel()
         if settings.distance and job.vertices is not None:
             progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
@@ -498,6 +500,8 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
             centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)
             output.materials = plan.nearest_face_values(job.vertices, job.faces,
                                                         job.face_materials, centroids)
+        if settings.quads:  # a quad joins two triangles of one material only
+            output.polygons = result.polygons(groups=output.materials)
         output.vertices = output.vertices / job.frame  # back to the object's local coordinates
     progress(1.0, "done")
     return outputs
@@ -582,7 +586,7 @@ def _remove_previous(job: Job, methods: list[str]) -> set[str]:
 
 def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupied) -> Made:
     name = f"{job.name}_{SUFFIXES[out.method]}"
-    mesh = mesh_io.new_mesh(name, out.vertices, out.faces, out.materials)
+    mesh = mesh_io.new_mesh(name, out.vertices, out.faces, out.materials, out.polygons)
     mesh_io.set_smooth(mesh, settings.smooth)
     for material_name, link in job.material_slots:
         material = bpy.data.materials.get(material_name) if material_name else None

@@ -51,6 +51,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="coloured grids (.vox): write plain geometry (by default each face "
                    "takes the colour of the nearest voxel: .glb one material per colour, .ply "
                    "face colours; .obj and .stl are always plain)")
+    p.add_argument("--quads", action="store_true",
+                   help=".obj/.ply output of a dual method: join each planar, convex pair of "
+                   "triangles of one dual-contouring quad into a quad, the rest stays "
+                   "triangles (docs/quads.md); .stl/.glb and a coloured .ply hold triangles "
+                   "only, and marching cubes has no quads")
     p.set_defaults(func=_cmd_remesh)
 
     p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
@@ -181,12 +186,28 @@ def _cmd_remesh(args) -> int:
     finally:
         bar.close()
     colors = result_colors(result) if args.colors else {}
-    save_mesh(result.vertices, result.faces, args.output, **colors)
+    polygons = result.polygons() if args.quads else None
+    save_mesh(result.vertices, result.faces, args.output, polygons=polygons, **colors)
     stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
     used = f", {len(set(colors['face_colors'].tolist()))} colours" if colors else ""
     print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces{used}, "
           f"{result.method}, {result.seconds:.2f} s ({stages})")
+    if polygons is not None:
+        print(_quads_line(polygons, args.output, result.face_quads is None, bool(colors)))
     return 0
+
+
+def _quads_line(polygons, output: Path, no_quads: bool, colored: bool) -> str:
+    """What ``--quads`` wrote, or why it wrote triangles."""
+    from .gridio import polygon_extensions
+
+    if no_quads:
+        return "--quads: marching cubes has no quads; triangles written"
+    if output.suffix.lower() not in polygon_extensions(colored):
+        kind = "a coloured " if colored and output.suffix.lower() == ".ply" else ""
+        return f"--quads: {kind}{output.suffix} holds triangles only; triangles written"
+    return (f"--quads: {len(polygons.quads)} quads and {len(polygons.triangles)} triangles "
+            f"({100 * polygons.quad_fraction:.1f} % quads)")
 
 
 def _cmd_batch(args) -> int:

@@ -159,7 +159,8 @@ PATCH, PATCH_COUNT, PATCH_SHIFT, FACE_JOINED = _patch_tables()
 
 
 def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarray | None = None, *,
-                 min_component_faces: int = 0, merge_vertices: bool = False):
+                 min_component_faces: int = 0, merge_vertices: bool = False,
+                 face_quads: bool = False):
     """Contour a lattice of dual vertices and occupied edges.
 
     Args:
@@ -175,10 +176,13 @@ def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarra
         min_component_faces: drop connected components with fewer faces than this.
         merge_vertices: merge vertices that coincide (e.g. cells whose vertices were clipped
             onto a shared face); this may undo the manifold split.
+        face_quads: also return the quad (crossed lattice edge) each triangle comes from, so
+            the triangles can be joined back into quads (``quads.py``).
 
     Returns:
-        vertices: (V, 3) float64 lattice coordinates; faces: (F, 3) int64. Empty input gives
-        zero-size arrays of these shapes.
+        vertices: (V, 3) float64 lattice coordinates; faces: (F, 3) int64; with ``face_quads``
+        also (F,) int64 quad id of each face (two faces per quad, three where a tube vertex
+        splits one of them). Empty input gives zero-size arrays of these shapes.
     """
     if inside is not None:
         inside = np.asarray(inside, dtype=bool)
@@ -188,12 +192,19 @@ def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarra
     if inside is None:
         vertices, quad_ids = _compact_vertices(quads, vertex_dx3)
         faces = _split_quads(quad_ids, vertices)
+        quad_of_face = np.repeat(np.arange(len(quad_ids)), 2)
     else:
-        vertices, faces = _contour_patches(quads, points, axes, vertex_dx3, inside)
+        vertices, faces, quad_of_face = _contour_patches(quads, points, axes, vertex_dx3,
+                                                         inside)
     if merge_vertices:
-        vertices, faces = _merge_vertices(vertices, faces)
+        vertices, faces, kept = _merge_vertices(vertices, faces)
+        quad_of_face = quad_of_face[kept]
     if min_component_faces > 0:
-        vertices, faces = drop_small_components(vertices, faces, min_component_faces)
+        kept = large_component_faces(faces, len(vertices), min_component_faces)
+        vertices, faces = _keep_faces(vertices, faces, kept)
+        quad_of_face = quad_of_face[kept]
+    if face_quads:
+        return vertices, faces, quad_of_face.astype(np.int64)
     return vertices, faces
 
 
@@ -218,10 +229,12 @@ def _check_parity(edge_dx3: np.ndarray, inside: np.ndarray) -> None:
 
 
 def _contour_patches(quads, points, axes, vertex_dx3, inside):
-    """The manifold path: one vertex per (cell, patch), plus a pair per tube face."""
+    """The manifold path: one vertex per (cell, patch), plus a pair per tube face.
+
+    Returns vertices (V, 3), faces (F, 3) and the (F,) quad of each face."""
     shape = inside.shape
     if len(quads) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
     cells, cell_ids = _used_cells(quads, shape)  # (C,) flat, (E, 4)
     config = _cell_configs(cells, inside)  # (C,) uint8
     local = _quad_local_edges(axes)  # (E, 4) cell edge of each quad corner
@@ -236,7 +249,10 @@ def _contour_patches(quads, points, axes, vertex_dx3, inside):
     side_ids[flip] = side_ids[flip][:, [2, 1, 0, 3]]
     vertices = np.concatenate([vertices, extra])
     faces = _split_quads(quad_ids, vertices)
-    return vertices, _split_tube_sides(faces, quad_ids, side_ids, vertices)
+    # _split_tube_sides appends one triangle per tube side, in order of quad, then side
+    quad_of_face = np.concatenate([np.repeat(np.arange(len(quads)), 2),
+                                   np.nonzero(side_ids >= 0)[0]])
+    return vertices, _split_tube_sides(faces, quad_ids, side_ids, vertices), quad_of_face
 
 
 def _used_cells(quads: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
@@ -434,9 +450,10 @@ def _split_quads(quad_ids: np.ndarray, vertices: np.ndarray) -> np.ndarray:
 
 
 def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, digits: int = 6):
-    """Merge coincident vertices and drop faces that collapse."""
+    """Merge coincident vertices and drop faces that collapse: vertices, faces and the (F,)
+    bool mask of the faces kept."""
     if len(vertices) == 0:
-        return vertices, faces
+        return vertices, faces, np.ones(len(faces), dtype=bool)
     keys = np.round(vertices, digits)
     unique, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # keep the original vertex order
@@ -444,7 +461,7 @@ def _merge_vertices(vertices: np.ndarray, faces: np.ndarray, digits: int = 6):
     rank[order] = np.arange(len(order))
     faces = rank[inverse.reshape(-1)][faces]
     ok = (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    return vertices[first[order]], faces[ok]
+    return vertices[first[order]], faces[ok], ok
 
 
 def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
@@ -465,9 +482,19 @@ def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 
 def drop_small_components(vertices, faces, min_faces: int):
     """Remove connected components with fewer than ``min_faces`` faces; unused vertices go too."""
-    labels = face_components(faces, len(vertices))
+    return _keep_faces(vertices, faces, large_component_faces(faces, len(vertices), min_faces))
+
+
+def large_component_faces(faces: np.ndarray, n_vertices: int, min_faces: int) -> np.ndarray:
+    """(F,) bool: the face's connected component has at least ``min_faces`` faces."""
+    labels = face_components(faces, n_vertices)
     sizes = np.bincount(labels) if len(labels) else np.zeros(0, dtype=np.int64)
-    faces = faces[sizes[labels] >= min_faces] if len(faces) else faces
+    return sizes[labels] >= min_faces
+
+
+def _keep_faces(vertices, faces, kept):
+    """The faces where ``kept`` (F,) is set and the vertices they use, renumbered in order."""
+    faces = faces[kept]
     used = np.unique(faces)
     remap = np.full(len(vertices), -1, dtype=np.int64)
     remap[used] = np.arange(len(used))

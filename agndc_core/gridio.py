@@ -209,7 +209,13 @@ def _require_stl_layout(path: Path) -> None:
                             "does not match its triangle count) nor an ASCII STL")
 
 
-def save_mesh(vertices, faces, path, *, face_colors=None, palette=None) -> None:
+def polygon_extensions(colored: bool = False) -> tuple[str, ...]:
+    """The mesh outputs ``save_mesh`` writes quads to (a coloured ``.ply`` keeps triangles)."""
+    return (".obj",) if colored else (".obj", ".ply")
+
+
+def save_mesh(vertices, faces, path, *, face_colors=None, palette=None,
+              polygons=None) -> None:
     """Write a triangle mesh, keeping the vertex order (no merging or reordering).
 
     Parameters
@@ -222,6 +228,10 @@ def save_mesh(vertices, faces, path, *, face_colors=None, palette=None) -> None:
         Palette index of each face, with ``palette`` (256, 4) uint8 sRGB(A): ``.glb`` gets one
         material per used colour, ``.ply`` face colours (``colors.colored_mesh_bytes``);
         ``.obj`` and ``.stl`` stay plain geometry.
+    polygons : quads.QuadMesh, optional
+        The same surface as quads and triangles (``RemeshResult.polygons()``): written instead
+        of ``faces`` to ``.obj``, and to ``.ply`` without ``face_colors`` (a coloured ``.ply``
+        keeps its triangles); ``.stl`` and ``.glb`` hold triangles only and get ``faces``.
     """
     import trimesh
 
@@ -229,6 +239,12 @@ def save_mesh(vertices, faces, path, *, face_colors=None, palette=None) -> None:
     ext = _require_extension(path, MESH_SAVE_EXTENSIONS, "mesh output")
     vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    if polygons is not None and ext in polygon_extensions(face_colors is not None):
+        from .formats.polygons import obj_bytes, ply_bytes
+
+        write = obj_bytes if ext == ".obj" else ply_bytes
+        _write_bytes(path, write(vertices, polygons.quads, polygons.triangles))
+        return
     data = None
     if face_colors is not None and len(faces):
         from .colors import colored_mesh_bytes

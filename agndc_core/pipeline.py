@@ -65,6 +65,9 @@ class RemeshResult:
         vertices: (V, 3) float64 world coordinates; faces: (F, 3) int64, wound outward.
         method: the method that made it; seconds: wall time of ``remesh``;
         timings: seconds per stage; grid: the input grid.
+        face_quads: (F,) int64 dual-contouring quad (crossed lattice edge) of each face, for
+            the dual methods; None for marching cubes, which has no quads. ``polygons``
+            joins the triangles back into quads.
     """
 
     vertices: np.ndarray
@@ -73,6 +76,14 @@ class RemeshResult:
     seconds: float = 0.0
     timings: dict = field(default_factory=dict)
     grid: VoxelGrid | None = None
+    face_quads: np.ndarray | None = None
+
+    def polygons(self, **options):
+        """The mesh as quads and triangles (``quads.quad_mesh``): the same surface, with each
+        planar, convex pair of triangles of one dual-contouring quad joined into a quad."""
+        from .quads import quad_mesh
+
+        return quad_mesh(self, **options)
 
 
 class _Stages:
@@ -148,6 +159,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         raise AGNDCError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     grid.check_not_trivial()
     stages = _Stages(progress, cancel)
+    face_quads = None
     if method in ("mc", "mc_taubin"):
         from .mc import marching_cubes_lattice
 
@@ -177,8 +189,10 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
                                 vertex, pinned)
         edge = crossed_edges(lattice)
-        vertices, faces = stages.run("dual contouring", 0.9, dual_contour, vertex, edge, lattice,
-                                     min_component_faces=min_component_faces)
+        # the later stages move vertices only: faces (and their quads) keep their order
+        vertices, faces, face_quads = stages.run(
+            "dual contouring", 0.9, dual_contour, vertex, edge, lattice,
+            min_component_faces=min_component_faces, face_quads=True)
         if filtered:
             vertices = stages.run("normal filter", 0.95, filter_contoured_mesh, vertices,
                                   faces, vertex, pinned, check=stages.check)
@@ -189,7 +203,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
         progress(1.0, "done")
-    return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid)
+    return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid, face_quads)
 
 
 def unfold_components(vertices, faces, lattice, edge, min_component_faces: int = 0):

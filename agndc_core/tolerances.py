@@ -24,6 +24,12 @@ class Tolerances:
     # the plane. Measured on the dev meshes at 64³ (agndc CD): 1 misses terraces (4.115, worse
     # than not flattening, 4.048); 2, 3 and 5 give 4.032-4.033; 3 keeps the best edges (ECD)
     terrace_reach: int = 3
+    # quad output (quads.py): two triangles of a dual-contouring quad are joined when each far
+    # vertex lies within this many voxels of the other triangle's plane
+    quad_planar: float = 0.05
+    # ... and every corner of the quad turns by more than this sine (about 1 degree): no fold,
+    # no bow tie, no straight corner
+    quad_corner: float = 0.0175
 
 
 tol = Tolerances()

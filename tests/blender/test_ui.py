@@ -184,7 +184,7 @@ def test_draw_functions(addon):
         draw(fake, bpy.context)
     props = [name for kind, name in log if kind == "prop"]
     assert props == ["method", "normal_filter", "size_mode", "resolution", "use_modifiers",
-                     "output", "compare_mc", "smooth", "threads"]
+                     "output", "compare_mc", "quads", "smooth", "threads"]
     labels = [text for kind, text in log if kind == "label"]
     (grid,) = [re.fullmatch(r"Part: (\d+) × (\d+) × (\d+) voxels", t) for t in labels
                if t.startswith("Part: ")]
