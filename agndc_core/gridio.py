@@ -100,7 +100,7 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
     _require_file(path)
     name = path.name
     if ext == ".npy":
-        return VoxelGrid(_read_npy(path), source=name)
+        return _binary_grid(_read_npy(path), np.eye(4), name)
     if ext == ".npz":
         return _read_npz(path)
     if ext == ".binvox":
@@ -280,7 +280,16 @@ def _read_npy(path: Path) -> np.ndarray:
 
 def _read_npz(path: Path) -> VoxelGrid:
     values, placement = _npz_values(path)
-    return VoxelGrid(values, _npz_affine(placement, path.name), source=path.name)
+    return _binary_grid(values, _npz_affine(placement, path.name), path.name)
+
+
+def _binary_grid(values: np.ndarray, affine: np.ndarray, name: str) -> VoxelGrid:
+    """The grid of an .npy / .npz array; a label map is refused with what to do instead."""
+    from .labelmaps import refuse_label_map
+
+    if isinstance(values, np.ndarray) and values.ndim == 3:
+        refuse_label_map(values, name)
+    return VoxelGrid(values, affine, source=name)
 
 
 def _npz_values(path: Path) -> tuple[np.ndarray, dict]:

@@ -61,17 +61,35 @@ class MergedLabelsWarning(UserWarning):
 
 def warn_if_merged(values: np.ndarray, source: str) -> None:
     """Warn (``MergedLabelsWarning``) when ``values``, about to be read as the mask
-    ``values > 0``, hold two or more positive labels. (X, Y, Z) values of any dtype; only
-    integers and whole-number floats are labels."""
+    ``values > 0``, hold two or more positive labels."""
+    labels = merged_labels(values)
+    if labels is not None:
+        warnings.warn(MergedLabelsWarning(source, labels),
+                      stacklevel=4)  # the caller of load_grid
+
+
+def refuse_label_map(values: np.ndarray, source: str) -> None:
+    """Raise GridError for ``values`` holding two or more positive labels where a binary grid
+    is read (.npy, .npz), with what to do instead; other values are left to the grid check."""
+    labels = merged_labels(values)
+    if labels is not None:
+        raise GridError(f"{source}: a label map ({len(labels)} labels: {_shown(labels)}), not a "
+                        "binary grid: mesh each label on its own (agndc remesh --per-label; "
+                        "Blender: Per Label), or threshold it into one mask")
+
+
+def merged_labels(values: np.ndarray) -> np.ndarray | None:
+    """(L,) int64 the positive labels of (X, Y, Z) ``values`` when there are two or more (the
+    volume is a label map, not a mask), else None. Only integers and whole-number floats are
+    labels."""
     if values.dtype.kind not in "iuf":
-        return
+        return None
     positive = values[values > 0]
     if positive.size == 0 or positive.min() == positive.max():  # one label: a plain mask
-        return
+        return None
     if values.dtype.kind == "f" and not np.all(positive == np.round(positive)):
-        return
-    warnings.warn(MergedLabelsWarning(source, np.unique(positive).astype(np.int64)),
-                  stacklevel=4)  # the caller of load_grid
+        return None
+    return np.unique(positive).astype(np.int64)
 
 
 @dataclass

@@ -234,3 +234,13 @@ def test_cli_label_subset_unknown_labels_and_the_merged_warning(tmp_path, capsys
     err = capsys.readouterr().err
     assert "agndc: warning: seg.nii.gz holds 3 labels (1, 3, 7): read as one mask, they are " \
            "merged into one solid; --per-label meshes each label on its own" in err
+
+
+def test_npy_label_map_read_as_a_binary_grid_says_what_to_do(tmp_path):
+    np.save(tmp_path / "seg.npy", three_labels())
+    with pytest.raises(GridError, match=r"seg.npy: a label map \(3 labels: 1, 3, 7\), not a "
+                                        r"binary grid: mesh each label on its own "
+                                        r"\(agndc remesh --per-label; Blender: Per Label\)"):
+        load_grid(tmp_path / "seg.npy")
+    np.savez(tmp_path / "mask.npz", occupancy=(three_labels() == 3).astype(np.int16))
+    assert load_grid(tmp_path / "mask.npz").occupancy.sum() == 2880  # one label: a mask
