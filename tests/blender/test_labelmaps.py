@@ -106,3 +106,24 @@ def test_per_label_estimate_covers_every_label(addon, tmp_path, monkeypatch):
     assert message.startswith("3 grids (seg_label-1 ") and "seg_label-7 " in message
     total = sum(job.estimate for job in jobs)
     assert operators.format_seconds(total) in message
+
+
+def test_per_label_partial_failure_and_cancel_behave_like_any_import(addon, tmp_path):
+    import threading
+
+    path, _ = _save(tmp_path, "npy")
+    remesh = addon.remesh
+    settings = remesh.Settings(method="mc", compare_mc=False, per_label=True)
+    jobs = remesh.grid_jobs([path], settings)
+    cancel = threading.Event()
+    cancel.set()
+    with pytest.raises(addon.core.errors.CancelledError):
+        remesh.compute_jobs(jobs, settings, cancel=cancel)
+    assert len(bpy.data.objects) == 0
+    jobs = remesh.grid_jobs([path], settings)
+    jobs[1].grid.occupancy[:] = False  # label 3's grid made unusable: that label fails alone
+    remesh.compute_jobs(jobs, settings)
+    reports = remesh.apply_jobs(jobs, settings)
+    level, text = remesh.summarize(reports)
+    assert level == "WARNING" and text.startswith("2 remeshed, 1 failed: seg_label-3: ")
+    assert sorted(obj.name for obj in bpy.data.objects) == ["seg_label-1_MC", "seg_label-7_MC"]
