@@ -127,3 +127,29 @@ def test_per_label_partial_failure_and_cancel_behave_like_any_import(addon, tmp_
     level, text = remesh.summarize(reports)
     assert level == "WARNING" and text.startswith("2 remeshed, 1 failed: seg_label-3: ")
     assert sorted(obj.name for obj in bpy.data.objects) == ["seg_label-1_MC", "seg_label-7_MC"]
+
+
+def test_import_dialog_shows_per_label_and_its_list_when_ticked(addon):
+    from types import SimpleNamespace
+
+    operators = importlib.import_module(f"{addon.module}.operators")
+    rna = bpy.ops.import_mesh.agndc_grid.get_rna_type()
+    assert rna.properties["per_label"].name == "Per Label"
+    assert "1,3,7" in rna.properties["labels"].description
+
+    class Layout:
+        use_property_split = use_property_decorate = active = False
+
+        def column(self):
+            return self
+
+        def prop(self, data, name):
+            assert name in rna.properties, name
+            shown.append(name)
+
+    for ticked in (False, True):
+        shown = []
+        data = SimpleNamespace(method="agndc", vox_models="INDEX", per_label=ticked)
+        operators.draw_settings(Layout(), data, mesh=False)
+        start = shown.index("per_label")
+        assert (shown[start + 1] == "labels") == ticked and shown.count("labels") == ticked
