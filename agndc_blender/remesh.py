@@ -681,7 +681,8 @@ def import_grid(path, settings: Settings | None = None, progress=None, cancel=No
     settings = settings or Settings()
     jobs = grid_jobs([path], settings)
     if len(jobs) > 1:
-        raise errors.AGNDCError("import_grid reads one model; use grid_jobs for several")
+        raise errors.AGNDCError("import_grid reads one model or label; use grid_jobs for "
+                                "several")
     return _run_one(jobs, settings, progress, cancel)
 
 

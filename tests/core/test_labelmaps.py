@@ -230,6 +230,9 @@ def test_cli_label_subset_unknown_labels_and_the_merged_warning(tmp_path, capsys
                  "--method", "mc"]) == 2
     assert "agndc: error: seg.npy: no label 4; the labels present are 1, 3, 7" \
         in capsys.readouterr().err
+    (tmp_path / "part.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    assert main(["remesh", str(tmp_path / "part.obj"), "-o", str(out), "--per-label"]) == 2
+    assert "part.obj: --per-label reads a label map" in capsys.readouterr().err
     assert main(["remesh", str(tmp_path / "seg.nii.gz"), "-o", str(out), "--method", "mc"]) == 0
     err = capsys.readouterr().err
     assert "agndc: warning: seg.nii.gz holds 3 labels (1, 3, 7): read as one mask, they are " \
