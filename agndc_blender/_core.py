@@ -15,8 +15,8 @@ from importlib.util import find_spec
 #: the package the core is imported from: vendored in the built extension, else installed
 BASE = (f"{__package__}.agndc_core" if find_spec(f"{__package__}.agndc_core") is not None
         else "agndc_core")
-MODULES = ("checkpoint", "colors", "errors", "gridio", "methods", "metrics", "pipeline", "plan",
-           "voxelize")
+MODULES = ("checkpoint", "colors", "errors", "gridio", "labelmaps", "methods", "metrics",
+           "pipeline", "plan", "voxelize")
 
 def __getattr__(name):
     if name == "core":

@@ -373,6 +373,12 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
     colors: BoolProperty(name="Voxel Colors", default=True,
                          description="Coloured grids (MagicaVoxel .vox): one material per "
                          "palette color, each face colored by the nearest voxel")
+    per_label: BoolProperty(name="Per Label", default=False,
+                            description="Label maps (.nii .nii.gz .npy .npz): one object per "
+                            "label (each positive value), named <file>_label-<value>, in place; "
+                            "off: every label merged into one solid")
+    labels: StringProperty(name="Labels", default="",
+                           description="Only these labels, e.g. 1,3,7 (empty: every label)")
     use_modal: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
     # set on the second call of a long import: ask (invoke) or run (execute) without asking again
     confirm: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
@@ -383,6 +389,11 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
 
     def _model_index(self, remesh) -> int:
         return remesh.ALL_MODELS if self.vox_models == "ALL" else self.model_index
+
+    def settings(self, context, remesh):
+        settings = super().settings(context, remesh)
+        settings.per_label, settings.labels = self.per_label, self.labels
+        return settings
 
     def paths(self) -> list[str]:
         """The chosen files: several from the file browser or a drop, else ``filepath``."""
@@ -467,6 +478,9 @@ def draw_settings(layout, data, mesh: bool) -> None:
         if data.vox_models == "INDEX":
             col.prop(data, "model_index")
         col.prop(data, "colors")
+        col.prop(data, "per_label")
+        if data.per_label:
+            col.prop(data, "labels")
     sub = col.column()
     sub.active = data.method != "mc" and not (mesh and data.output == "REPLACE")
     sub.prop(data, "compare_mc")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import os
 import threading
 import traceback
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -35,7 +36,7 @@ from mathutils import Matrix
 
 from . import mesh_io
 from ._core import checkpoint as checkpoint_module
-from ._core import colors, errors, gridio, metrics, pipeline, plan, voxelize
+from ._core import colors, errors, gridio, labelmaps, metrics, pipeline, plan, voxelize
 from ._core import methods as registry
 
 #: collection that receives the results placed beside their sources
@@ -55,6 +56,10 @@ ALL_MODELS = -1
 #: custom properties that tie a result to its input, so a later run can replace it
 TAG_SOURCE, TAG_FILE, TAG_MODEL, TAG_METHOD = ("agndc_source", "agndc_source_file",
                                                "agndc_model", "agndc_method")
+#: custom property of a result made from one label of a label map (``Settings.per_label``)
+TAG_LABEL = "agndc_label"
+#: what a label map imported as one mask should do instead (``labelmaps.MergedLabelsWarning``)
+MERGED_LABELS_HINT = "tick Per Label to import each label as its own object"
 BUSY_MESSAGE = "Another AGNDC remesh is running: wait for it to finish or press Esc"
 
 #: held while ``compute_jobs`` runs: a second run (operator, script, batch) cannot start beside it
@@ -79,6 +84,8 @@ class Settings:
     replace_source: bool = False  # the result takes the source's place, the source is hidden
     model_index: int = 0  # .vox files: which model; ALL_MODELS = each model as an object
     colors: bool = True  # coloured grids (.vox): one material per used palette colour
+    per_label: bool = False  # label maps (.nii .nii.gz .npy .npz): each label as an object
+    labels: str = ""  # with per_label: only these labels ("1,3,7"); empty = every label
 
     def methods(self) -> list[str]:
         """The methods each input is reconstructed with (the result, then MC to compare)."""
@@ -136,6 +143,7 @@ class Job:
     grid_path: str | None = None
     grid: object = None  # the VoxelGrid read for the estimate (grid input), reused by the run
     model_index: int = 0
+    label: int | None = None  # the label of a label map this job meshes (per-label import)
     matrix: np.ndarray = field(default_factory=lambda: np.eye(4))  # the source's matrix_world
     parent: str | None = None
     parent_inverse: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -348,14 +356,37 @@ def grid_jobs(paths, settings: Settings) -> list[Job]:
 
 
 def _estimate_grid_job(job: Job, settings: Settings) -> None:
-    """Read a grid job's grid (kept for the run) and estimate the run from its size and
-    surface, as for meshes: a long import asks first (``operators.confirm_message``)."""
-    job.grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
+    """Read a grid job's grid (kept for the run; a label's is read with its label map) and
+    estimate the run from its size and surface, as for meshes: a long import asks first
+    (``operators.confirm_message``), the estimate of a per-label import covers every label."""
+    if job.grid is None:
+        job.grid = _read_grid(job)
     job.shape = tuple(job.grid.shape)
     crossings = plan.grid_crossings(job.grid.occupancy)
     # no source mesh: no Chamfer distance to report
     job.estimate = estimate_run(settings.methods(), job.shape, crossings, settings.threads,
                                 distances=False)
+
+
+def _read_grid(job: Job):
+    """The grid of a grid job: one label of its label map, else the file's (model's) grid,
+    with a warning when a label map is read as one mask (its labels merged)."""
+    if job.label is not None:
+        return labelmaps.load_label_map(job.grid_path).grid(job.label)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", labelmaps.MergedLabelsWarning)
+        grid = gridio.load_grid(job.grid_path, model_index=job.model_index)
+    job.warnings += [f"{w.message}; {MERGED_LABELS_HINT}" for w in caught
+                     if issubclass(w.category, labelmaps.MergedLabelsWarning)]
+    return grid
+
+
+def _label_jobs(path: Path, name: str, settings: Settings) -> list[Job]:
+    """One job per chosen label of a label map (``Settings.labels``), named
+    ``<name>_label-<value>``, each holding its label's grid (cropped, in world place)."""
+    volume = labelmaps.load_label_map(path)
+    return [Job(name=labelmaps.label_name(name, label), grid_path=str(path), label=label,
+                grid=volume.grid(label)) for label in volume.select(settings.labels)]
 
 
 def _grid_file_jobs(path: Path, name: str, settings: Settings) -> list[Job]:
@@ -364,6 +395,8 @@ def _grid_file_jobs(path: Path, name: str, settings: Settings) -> list[Job]:
                                    f"{', '.join(gridio.GRID_EXTENSIONS)}")
     if not path.is_file():
         raise errors.GridFileError(f"{path}: no such file")
+    if settings.per_label:
+        return _label_jobs(path, name, settings)
     count = gridio.grid_model_count(path)
     if settings.model_index == ALL_MODELS:
         if count == 1:
@@ -459,7 +492,7 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
     sub = pipeline.subrange
     if job.grid_path is not None:
         progress(0.0, "reading grid")
-        grid = job.grid or gridio.load_grid(job.grid_path, model_index=job.model_index)
+        grid = job.grid if job.grid is not None else _read_grid(job)
         job.grid = None  # the run holds it now; the job does not keep it alive
         check_cancel()
         first = pipeline.remesh(grid, method=settings.method,
@@ -573,7 +606,7 @@ def _remove_previous(job: Job, methods: list[str]) -> set[str]:
            if obj.get(TAG_METHOD) in methods and (
                (source is not None and obj.get(TAG_SOURCE) == source) or
                (job.grid_path is not None and obj.get(TAG_FILE) == job.grid_path and
-                obj.get(TAG_MODEL) == job.model_index))]
+                obj.get(TAG_MODEL) == job.model_index and obj.get(TAG_LABEL) == job.label))]
     names = set()
     for obj in old:
         names.add(obj.name)
@@ -614,6 +647,8 @@ def _add_output(job: Job, k: int, out: Output, settings: Settings, scene, occupi
     if job.grid_path is not None:
         obj[TAG_FILE] = job.grid_path
         obj[TAG_MODEL] = job.model_index
+        if job.label is not None:
+            obj[TAG_LABEL] = job.label
     obj[TAG_METHOD] = out.method
     if replace and source is not None:
         source.hide_render = True
@@ -675,7 +710,8 @@ def import_grid(path, settings: Settings | None = None, progress=None, cancel=No
     settings = settings or Settings()
     jobs = grid_jobs([path], settings)
     if len(jobs) > 1:
-        raise errors.AGNDCError("import_grid reads one model; use grid_jobs for several")
+        raise errors.AGNDCError("import_grid reads one model or label; use grid_jobs for "
+                                "several")
     return _run_one(jobs, settings, progress, cancel)
 
 

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 from .errors import AGNDCError
@@ -56,6 +58,12 @@ def _parser() -> argparse.ArgumentParser:
                    "triangles of one dual-contouring quad into a quad, the rest stays "
                    "triangles (docs/quads.md); .stl/.glb and a coloured .ply hold triangles "
                    "only, and marching cubes has no quads")
+    p.add_argument("--per-label", action="store_true",
+                   help="label maps (.nii .nii.gz .npy .npz): one mesh per label (each "
+                   "positive value), written beside OUTPUT as <name>_label-<value>.<ext> "
+                   "(docs/labelmaps.md)")
+    p.add_argument("--labels", metavar="LIST",
+                   help="only these labels, e.g. 1,3,7 (implies --per-label)")
     p.set_defaults(func=_cmd_remesh)
 
     p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
@@ -173,25 +181,21 @@ def _cmd_remesh(args) -> int:
     from .gridio import save_mesh
     from .pipeline import remesh_file
 
+    if args.per_label or args.labels:
+        return _remesh_labels(args)
     bar, update = _progress_bar(args.input.name)
     try:
-        result = remesh_file(args.input, method=args.method, resolution=args.res,
-                             voxel_size=args.voxel_size, model_index=args.model_index,
-                             checkpoint=args.checkpoint, threads=args.threads,
-                             device=args.device, progress=update,
-                             min_component_faces=args.min_component_faces,
-                             flat_patches=args.flat_patches,
-                             normal_filter=args.normal_filter,
-                             source_bounds=args.source_bounds)
+        with _merged_labels_hint():
+            result = remesh_file(args.input, method=args.method, resolution=args.res,
+                                 voxel_size=args.voxel_size, model_index=args.model_index,
+                                 progress=update, **_remesh_options(args))
     finally:
         bar.close()
     colors = result_colors(result) if args.colors else {}
     polygons = result.polygons() if args.quads else None
     save_mesh(result.vertices, result.faces, args.output, polygons=polygons, **colors)
-    stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
-    used = f", {len(set(colors['face_colors'].tolist()))} colours" if colors else ""
-    print(f"{args.output}: {len(result.vertices)} vertices, {len(result.faces)} faces{used}, "
-          f"{result.method}, {result.seconds:.2f} s ({stages})")
+    used = f" ({len(set(colors['face_colors'].tolist()))} colours)" if colors else ""
+    print(f"{args.output}: {_result_line(result)}{used}")
     if polygons is not None:
         print(_quads_line(polygons, args.output, result.face_quads is None, bool(colors)))
     return 0
@@ -208,6 +212,68 @@ def _quads_line(polygons, output: Path, no_quads: bool, colored: bool) -> str:
         return f"--quads: {kind}{output.suffix} holds triangles only; triangles written"
     return (f"--quads: {len(polygons.quads)} quads and {len(polygons.triangles)} triangles "
             f"({100 * polygons.quad_fraction:.1f} % quads)")
+
+
+def _remesh_options(args) -> dict:
+    """``pipeline.remesh``'s options from the flags of ``agndc remesh``."""
+    return dict(checkpoint=args.checkpoint, threads=args.threads, device=args.device,
+                min_component_faces=args.min_component_faces, flat_patches=args.flat_patches,
+                normal_filter=args.normal_filter, source_bounds=args.source_bounds)
+
+
+def _result_line(result) -> str:
+    stages = ", ".join(f"{k} {v:.2f}s" for k, v in result.timings.items())
+    return (f"{len(result.vertices)} vertices, {len(result.faces)} faces, {result.method}, "
+            f"{result.seconds:.2f} s ({stages})")
+
+
+def _remesh_labels(args) -> int:
+    """``agndc remesh --per-label``: each label's mesh written as soon as it is made."""
+    from .gridio import is_grid_path, save_mesh
+    from .labelmaps import iter_remesh_labels, label_output_path, load_label_map
+
+    if not is_grid_path(args.input):
+        raise AGNDCError(f"{args.input.name}: --per-label reads a label map (.nii .nii.gz .npy "
+                         ".npz), not a mesh")
+    volume = load_label_map(args.input)
+    counts = volume.labels()
+    chosen = volume.select(args.labels)  # unknown labels fail before any work
+    print(f"{args.input.name}: {len(counts)} labels, meshing {len(chosen)}")
+    bar, update = _progress_bar(args.input.name)
+    try:
+        for label, result in iter_remesh_labels(volume, labels=chosen, method=args.method,
+                                                progress=update, **_remesh_options(args)):
+            path = label_output_path(args.output, label)
+            polygons = result.polygons() if args.quads else None
+            save_mesh(result.vertices, result.faces, path, polygons=polygons)
+            bar.write(f"{path}: label {label} ({counts[label]:,} voxels): "
+                      f"{_result_line(result)}")
+            if polygons is not None:
+                bar.write(_quads_line(polygons, path, result.face_quads is None, False))
+    finally:
+        bar.close()
+    return 0
+
+
+@contextmanager
+def _merged_labels_hint():
+    """Print a label map read as one mask (``labelmaps.MergedLabelsWarning``) as one
+    ``agndc: warning:`` line that names the option meshing each label."""
+    from .labelmaps import MergedLabelsWarning
+
+    caught = []
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MergedLabelsWarning)
+            yield
+    finally:  # a run that fails still says how its file was read
+        for warning in caught:
+            if issubclass(warning.category, MergedLabelsWarning):
+                print(f"agndc: warning: {warning.message}; --per-label meshes each label on "
+                      "its own", file=sys.stderr)
+            else:  # not ours: shown as Python would have shown it
+                warnings.showwarning(warning.message, warning.category, warning.filename,
+                                     warning.lineno)
 
 
 def _cmd_batch(args) -> int:

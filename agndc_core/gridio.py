@@ -11,6 +11,8 @@ Grids (``load_grid`` / ``save_grid``):
   volumes are refused (threshold them first). The header's affine is kept, so meshes come out in
   world units (nibabel's affine maps voxel indices to world exactly like ``VoxelGrid.affine``).
   NIfTI stores the affine in float32, so a saved affine comes back to about 1e-7 relative.
+  A label volume read so is one mask, its labels merged: ``labelmaps.MergedLabelsWarning`` says
+  so, and ``labelmaps.py`` meshes each label on its own (``load_grid_values`` reads the values).
 
 Meshes (``load_mesh`` / ``save_mesh``) go through trimesh.
 
@@ -44,6 +46,9 @@ from .grid import MAX_VOXELS, VoxelGrid
 from .voxelize import check_mesh
 
 GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
+#: grid formats that can hold a label map, one integer value per structure
+#: (``load_grid_values``, ``labelmaps.py``)
+LABEL_EXTENSIONS = (".npy", ".npz", ".nii", ".nii.gz")
 #: meshes ``load_mesh`` reads (trimesh's loaders that need no optional dependency)
 MESH_EXTENSIONS = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 #: meshes ``save_mesh`` writes
@@ -96,7 +101,7 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
     _require_file(path)
     name = path.name
     if ext == ".npy":
-        return VoxelGrid(_read_npy(path), source=name)
+        return _binary_grid(_read_npy(path), np.eye(4), name)
     if ext == ".npz":
         return _read_npz(path)
     if ext == ".binvox":
@@ -108,6 +113,45 @@ def load_grid(path, *, model_index: int = 0) -> VoxelGrid:
         indices, palette = read_vox_colors(_read_bytes(path), name, model_index)
         return VoxelGrid(indices != 0, source=name, colors=VoxelColors(indices, palette))
     return _read_nifti(path)
+
+
+def load_grid_values(path) -> tuple[np.ndarray, np.ndarray]:
+    """The voxel values of a grid file that can hold a label map (``LABEL_EXTENSIONS``), as
+    stored, before they become occupancy, and the file's placement.
+
+    Returns
+    -------
+    values : (X, Y, Z) array of the file's dtype
+    affine : (4, 4) float64 index -> world (identity for ``.npy``), as ``load_grid`` reads it
+
+    Raises GridFileError like ``load_grid`` (other formats: one that says which hold labels).
+    """
+    path = Path(path)
+    ext = _require_extension(path, GRID_EXTENSIONS, "grid")
+    if ext not in LABEL_EXTENSIONS:
+        raise GridFileError(f"{path.name}: {ext} files hold one solid, not a label map; label "
+                            f"maps are read from {', '.join(LABEL_EXTENSIONS)}")
+    _require_file(path)
+    if ext == ".npy":
+        return _read_npy(path), np.eye(4)
+    if ext == ".npz":
+        values, placement = _npz_values(path)
+        return values, _npz_affine(placement, path.name)
+    return _nifti_values(path)
+
+
+def _npz_affine(placement: dict, name: str) -> np.ndarray:
+    """(4, 4) affine of an .npz archive's placement arrays (identity when it has none), checked
+    as ``VoxelGrid`` checks it (on a one-voxel stand-in: the values are checked apart)."""
+    # placement arrays of the wrong shape or type: numpy's error, named and wrapped
+    with _reading(name, "unusable affine, voxel_size or origin array"):
+        stand_in = np.zeros((1, 1, 1), dtype=bool)
+        if "affine" in placement:
+            return VoxelGrid(stand_in, placement["affine"], source=name).affine
+        if "voxel_size" in placement and "origin" in placement:
+            return VoxelGrid.from_spacing(stand_in, placement["voxel_size"],
+                                          placement["origin"], source=name).affine
+    return np.eye(4)
 
 
 def grid_model_count(path) -> int:
@@ -268,7 +312,22 @@ def _read_npy(path: Path) -> np.ndarray:
 
 
 def _read_npz(path: Path) -> VoxelGrid:
-    """The occupancy array (see NPZ_ARRAY_NAMES) and its placement, if the archive stores one.
+    values, placement = _npz_values(path)
+    return _binary_grid(values, _npz_affine(placement, path.name), path.name)
+
+
+def _binary_grid(values: np.ndarray, affine: np.ndarray, name: str) -> VoxelGrid:
+    """The grid of an .npy / .npz array; a label map is refused with what to do instead."""
+    from .labelmaps import refuse_label_map
+
+    if isinstance(values, np.ndarray) and values.ndim == 3:
+        refuse_label_map(values, name)
+    return VoxelGrid(values, affine, source=name)
+
+
+def _npz_values(path: Path) -> tuple[np.ndarray, dict]:
+    """The grid array (see NPZ_ARRAY_NAMES) as stored and its placement arrays (``affine``,
+    ``voxel_size``, ``origin``), if the archive stores them.
 
     Only those arrays are decompressed, one at a time, so memory stays within one grid whatever
     the other members hold.
@@ -287,15 +346,7 @@ def _read_npz(path: Path) -> VoxelGrid:
             wanted = [_npz_occupancy_key(shapes, name)]
             wanted += [key for key in ("affine", "voxel_size", "origin") if key in members]
             arrays = {key: _npz_member(archive, members[key], name) for key in wanted}
-    occupancy = arrays.pop(wanted[0])
-    # placement arrays of the wrong shape or type: numpy's error, named and wrapped
-    with _reading(name, "unusable affine, voxel_size or origin array"):
-        if "affine" in arrays:
-            return VoxelGrid(occupancy, arrays["affine"], source=name)
-        if "voxel_size" in arrays and "origin" in arrays:
-            return VoxelGrid.from_spacing(occupancy, arrays["voxel_size"], arrays["origin"],
-                                          source=name)
-    return VoxelGrid(occupancy, source=name)
+    return arrays.pop(wanted[0]), arrays
 
 
 def _npz_member(archive: zipfile.ZipFile, info: zipfile.ZipInfo, name: str, *,
@@ -360,6 +411,16 @@ def _npz_occupancy_key(shapes: dict, name: str) -> str:
 
 
 def _read_nifti(path: Path) -> VoxelGrid:
+    from .labelmaps import warn_if_merged
+
+    data, affine = _nifti_values(path)
+    grid = VoxelGrid(_label_occupancy(data), affine, source=path.name)
+    warn_if_merged(data, path.name)  # after the grid: a refused volume is not a label map
+    return grid
+
+
+def _nifti_values(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(X, Y, Z) voxel values as stored and the header's (4, 4) affine."""
     import nibabel as nib
 
     name = path.name
@@ -368,9 +429,7 @@ def _read_nifti(path: Path) -> VoxelGrid:
         shape = _drop_trailing_ones(image.shape)  # (X, Y, Z, 1) volumes are common
         guard_size(shape, name)  # before reading the voxel data
         _require_nifti_data(path, image.header, shape)
-        data = np.asanyarray(image.dataobj).reshape(shape)
-        affine = image.affine
-    return VoxelGrid(_label_occupancy(data), affine, source=name)
+        return np.asanyarray(image.dataobj).reshape(shape), image.affine
 
 
 def _require_nifti_data(path: Path, header, shape: tuple) -> None:
