@@ -130,7 +130,8 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
         edge = crossed_edges(inside)
         surface = surface_cells(edge)
         # sampled per scale, so coarse cells get the same sample density as fine ones
-        points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL)
+        points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL,
+                                          check=check)
         if check is not None:
             check()
         vertex, quadric = cell_vertices(points, normals, surface, frame, faces)
@@ -138,7 +139,12 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
     return labels
 
 
-def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+#: samples per chunk of ``surface_samples`` (about 100 bytes each in temporaries)
+SAMPLE_CHUNK = 1 << 21
+
+
+def surface_samples(triangles_fx3x3: np.ndarray, spacing: float,
+                    check=None) -> tuple[np.ndarray, np.ndarray]:
     """Deterministic samples of a triangle soup, about ``spacing`` apart, with face normals.
 
     Two kinds of samples, both per triangle and with that triangle's normal:
@@ -147,16 +153,42 @@ def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.nda
     * boundary: points every ``spacing`` along each edge, starting at its first corner, so every
       corner and crease is sampled by all the faces that meet there.
 
+    Triangles are sampled in chunks of about ``SAMPLE_CHUNK`` samples, ``check()`` before each;
+    every sample depends on its own triangle only, so the chunks give the same arrays.
+
     Returns:
-        points: (S, 3) float64; normals: (S, 3) float64 unit normals (degenerate faces dropped).
+        points: (S, 3) float64; normals: (S, 3) float64 unit normals (degenerate faces dropped):
+        every interior sample, then every boundary sample.
     """
     tri = np.asarray(triangles_fx3x3, dtype=np.float64)
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area2 = np.linalg.norm(cross, axis=1)
     keep = area2 > 1e-12
     tri, normal, area = tri[keep], cross[keep] / area2[keep, None], area2[keep] / 2
+    count = np.ceil(area / spacing**2).astype(np.int64)  # interior samples of each triangle
+    start, end = tri.reshape(-1, 3), tri[:, [1, 2, 0]].reshape(-1, 3)
+    steps = np.maximum(np.ceil(np.linalg.norm(end - start, axis=1) / spacing), 1).astype(np.int64)
+    per_triangle = np.cumsum(count + steps.reshape(-1, 3).sum(axis=1))
+    total = int(per_triangle[-1]) if len(per_triangle) else 0
+    cuts = np.searchsorted(per_triangle, np.arange(SAMPLE_CHUNK, total, SAMPLE_CHUNK)) + 1
+    bounds = np.unique(np.concatenate([[0], cuts, [len(tri)]]))
+    parts = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        if check is not None:
+            check()
+        parts.append(_sample_triangles(tri[lo:hi], normal[lo:hi], count[lo:hi],
+                                       start[3 * lo:3 * hi], end[3 * lo:3 * hi],
+                                       steps[3 * lo:3 * hi]))
+    if not parts:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    interior, interior_normals, boundary, boundary_normals = zip(*parts)
+    return (np.concatenate([*interior, *boundary]),
+            np.concatenate([*interior_normals, *boundary_normals]))
+
+
+def _sample_triangles(tri, normal, count, start, end, steps):
+    """Interior points and normals, boundary points and normals of a chunk of triangles."""
     # interior: R2 sequence (golden ratios of the plastic number) in the unit square, folded
-    count = np.ceil(area / spacing**2).astype(np.int64)
     owner, local = _enumerate(count)
     u = (0.5 + local * 0.7548776662466927) % 1.0
     v = (0.5 + local * 0.5698402909980532) % 1.0
@@ -165,14 +197,10 @@ def surface_samples(triangles_fx3x3: np.ndarray, spacing: float) -> tuple[np.nda
     t = tri[owner]
     interior = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
     # boundary: along each edge a -> b, points at a + (i / m) (b - a), i = 0 .. m-1
-    start, end = tri.reshape(-1, 3), tri[:, [1, 2, 0]].reshape(-1, 3)
-    steps = np.maximum(np.ceil(np.linalg.norm(end - start, axis=1) / spacing), 1).astype(np.int64)
     edge_owner, edge_local = _enumerate(steps)
     fraction = (edge_local / steps[edge_owner])[:, None]
     boundary = start[edge_owner] + fraction * (end - start)[edge_owner]
-    points = np.concatenate([interior, boundary])
-    normals = np.concatenate([normal[owner], normal[edge_owner // 3]])
-    return points, normals
+    return interior, normal[owner], boundary, normal[edge_owner // 3]
 
 
 def _enumerate(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -271,10 +299,45 @@ def _pull_into_cells(position, mass, corner) -> np.ndarray:
     return mass + step * t[:, None]
 
 
+#: cells around a query cell whose triangles may hold its closest point: the query is a
+#: surface cell's centre and the surface crosses that cell, so the closest point lies within
+#: sqrt(3)/2 of it, inside the next ring of cells; one ring more for the voxeliser's jitter
+NEAR_CELLS = 2
+
+
 def _closest_surface_points(queries, frame_vertices, faces) -> np.ndarray:
-    """(Q, 3) closest points on the mesh; used only for the rare cells no sample fell into."""
+    """(Q, 3) closest points on the mesh to surface-cell centres ``queries`` (lattice frame);
+    used only for the rare cells no sample fell into. Only the triangles that can hold one are
+    searched (``near_triangles``): a spatial tree of a million triangles took 10 s to build
+    for a handful of queries."""
     import trimesh  # only needed on this rare path
 
-    mesh = trimesh.Trimesh(frame_vertices, faces, process=False)
+    near = near_triangles(queries, frame_vertices, faces)
+    mesh = trimesh.Trimesh(frame_vertices, faces[near], process=False)
     closest, _, _ = trimesh.proximity.closest_point(mesh, queries)
     return closest
+
+
+def near_triangles(queries, frame_vertices, faces, rings: int = NEAR_CELLS) -> np.ndarray:
+    """(F,) bool: triangles whose bounding box reaches a cell within ``rings`` cells
+    (Chebyshev) of a query's cell. A box no wider than ``2 rings`` cells meets such a block of
+    ``2 rings + 1`` cells only with one of its corners inside, so small triangles are tested by
+    their box's 8 corners; wider ones are always kept."""
+    cells = np.floor(queries).astype(np.int64)  # (Q, 3)
+    lo_all = cells.min(axis=0) - rings
+    shape = cells.max(axis=0) + rings - lo_all + 1
+    marked = np.zeros(shape, dtype=bool)
+    for offset in np.ndindex(*(2 * rings + 1,) * 3):  # (2 rings + 1)^3 shifts, not per query
+        index = cells - lo_all + np.asarray(offset) - rings
+        marked[index[:, 0], index[:, 1], index[:, 2]] = True
+    triangles = frame_vertices[faces]  # (F, 3, 3)
+    lo, hi = np.floor(triangles.min(axis=1)), np.floor(triangles.max(axis=1))  # (F, 3)
+    wide = np.any(hi - lo > 2 * rings, axis=1)
+    near = wide.copy()
+    for corner in np.ndindex(2, 2, 2):
+        point = np.where(np.array(corner, dtype=bool), hi, lo).astype(np.int64) - lo_all
+        inside = np.all((point >= 0) & (point < shape), axis=1)
+        hit = np.zeros(len(faces), dtype=bool)
+        hit[inside] = marked[tuple(point[inside].T)]
+        near |= hit
+    return near

@@ -178,3 +178,37 @@ def test_binary_oracle_takes_the_midpoint_depth_of_axis_aligned_faces_only():
     turned = SHAPES["rotated_cube"]()
     np.testing.assert_allclose(run(turned, "oracle_binary").vertices,
                                run(turned, "oracle").vertices)
+
+
+def test_surface_samples_in_chunks_are_the_same_arrays(monkeypatch):
+    """Sharp's samples are made in chunks of triangles (a check before each): any chunk size
+    gives the same points and normals in the same order."""
+    from agndc_core import labels
+
+    mesh = cylinder_with_hole()
+    triangles = mesh.vertices[mesh.faces] * 30
+    whole = labels.surface_samples(triangles, 0.25)
+    monkeypatch.setattr(labels, "SAMPLE_CHUNK", 333)
+    calls = []
+    chunked = labels.surface_samples(triangles, 0.25, check=lambda: calls.append(1))
+    for a, b in zip(whole, chunked):
+        np.testing.assert_array_equal(a, b)
+    assert len(calls) > 10
+
+
+def test_closest_points_searched_near_the_queries_are_the_closest_of_the_whole_mesh():
+    """The rare sample-less cells take the closest point of the triangles near them only; that
+    is the closest point of the whole mesh, and far triangles are left out."""
+    from agndc_core.grid import crossed_edges, surface_cells
+    from agndc_core.labels import _closest_surface_points, near_triangles
+
+    mesh = sphere(subdivisions=5)
+    grid = voxelize(mesh.vertices, mesh.faces, 40)
+    frame = grid.world_to_index(mesh.vertices) + LATTICE_PAD
+    cells = np.argwhere(surface_cells(crossed_edges(pad_to_lattice(grid.occupancy))))
+    queries = cells[np.random.default_rng(0).choice(len(cells), 12, replace=False)] + 0.5
+    whole = trimesh.Trimesh(frame, mesh.faces, process=False)
+    expected = trimesh.proximity.closest_point(whole, queries)[0]
+    np.testing.assert_array_equal(_closest_surface_points(queries, frame, mesh.faces), expected)
+    near = near_triangles(queries, frame, mesh.faces)
+    assert 0 < near.sum() < 0.2 * len(mesh.faces)
