@@ -134,7 +134,7 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
                                           check=check)
         if check is not None:
             check()
-        vertex, quadric = cell_vertices(points, normals, surface, frame, faces)
+        vertex, quadric = cell_vertices(points, normals, surface, frame, faces, check)
         labels.append(ScaleLabels(inside, edge, surface, vertex, quadric))
     return labels
 
@@ -214,13 +214,15 @@ def _enumerate(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 QUADRIC_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
 
 
-def cell_vertices(points, normals, surface, frame_vertices, faces):
+def cell_vertices(points, normals, surface, frame_vertices, faces, check=None):
     """QEF vertex and normal quadric of every surface cell.
 
     Args:
         points, normals: (S, 3) samples in the scale's lattice frame (points at integer corners).
         surface: (D) bool surface cells.
         frame_vertices, faces: the mesh in the same frame, for cells that got no sample.
+        check: called between the steps and between batches of the sample-less cells'
+            closest-point searches.
 
     Returns:
         vertex: (D, 3) float32 offsets in [0, 1] from each cell's min corner; quadric: (D, 6)
@@ -238,13 +240,18 @@ def cell_vertices(points, normals, surface, frame_vertices, faces):
     surface_flat = np.flatnonzero(surface)
     slot = np.searchsorted(surface_flat, flat)
     corners = np.stack(np.unravel_index(surface_flat, surface.shape), axis=1).astype(np.float64)
+    tick = check if check is not None else (lambda: None)
+    tick()
     position = _solve_qef(slot, points, normals, corners)
+    tick()
     empty = np.isnan(position[:, 0])
     if np.any(empty):
-        position[empty] = _closest_surface_points(corners[empty] + 0.5, frame_vertices, faces)
+        position[empty] = _closest_surface_points(corners[empty] + 0.5, frame_vertices, faces,
+                                                  check)
     offsets = np.clip(position - corners, 0.0, 1.0)
     vertex = np.zeros(surface.shape + (3,), dtype=np.float32)
     vertex.reshape(-1, 3)[surface_flat] = offsets
+    tick()
     count = np.bincount(slot, minlength=len(corners)).astype(np.float64)
     entries = np.stack([np.bincount(slot, normals[:, r] * normals[:, c], len(corners))
                         for r, c in QUADRIC_ENTRIES], axis=1)
@@ -301,43 +308,66 @@ def _pull_into_cells(position, mass, corner) -> np.ndarray:
 
 #: cells around a query cell whose triangles may hold its closest point: the query is a
 #: surface cell's centre and the surface crosses that cell, so the closest point lies within
-#: sqrt(3)/2 of it, inside the next ring of cells; one ring more for the voxeliser's jitter
-NEAR_CELLS = 2
+#: sqrt(3)/2 of it, well inside the next ring of cells (1.5 from the centre)
+NEAR_CELLS = 1
 
 
-def _closest_surface_points(queries, frame_vertices, faces) -> np.ndarray:
+#: sample-less cells per batch of closest-point queries: a batch of nearby cells searches a slab
+#: of the mesh (``near_triangles``), and a cancellation check runs between batches
+QUERY_CHUNK = 256
+
+
+def _closest_surface_points(queries, frame_vertices, faces, check=None) -> np.ndarray:
     """(Q, 3) closest points on the mesh to surface-cell centres ``queries`` (lattice frame);
-    used only for the rare cells no sample fell into. Only the triangles that can hold one are
-    searched (``near_triangles``): a spatial tree of a million triangles took 10 s to build
-    for a handful of queries."""
+    used only for the rare cells no sample fell into. Queries go in batches of nearby cells
+    (sorted by position), each searching only the triangles that can hold its points
+    (``near_triangles``): a spatial tree of all of a dense mesh's triangles took 10 s to build
+    and could not be cancelled."""
     import trimesh  # only needed on this rare path
 
-    near = near_triangles(queries, frame_vertices, faces)
-    mesh = trimesh.Trimesh(frame_vertices, faces[near], process=False)
-    closest, _, _ = trimesh.proximity.closest_point(mesh, queries)
+    triangles = frame_vertices[faces]  # (F, 3, 3)
+    boxes = np.floor(triangles.min(axis=1)), np.floor(triangles.max(axis=1))  # (F, 3) each
+    candidates = near_triangles(queries, *boxes)
+    # triangles wider than a ring go to every batch (a dense mesh has few); the others by the
+    # box's low x, so a batch's candidates are one slice of them (a box spans <= 2 rings)
+    wide = np.any(boxes[1] - boxes[0] > 2 * NEAR_CELLS, axis=1)
+    small = np.flatnonzero(candidates & ~wide)
+    small = small[np.argsort(boxes[0][small, 0], kind="stable")]
+    low_x, wide = boxes[0][small, 0], np.flatnonzero(candidates & wide)
+    order = np.lexsort(np.floor(queries).T[::-1])  # x-major: a batch covers a slab
+    closest = np.empty_like(queries, dtype=np.float64)
+    for a in range(0, len(order), QUERY_CHUNK):
+        if check is not None:
+            check()
+        batch = order[a:a + QUERY_CHUNK]
+        x = np.floor(queries[batch, 0])
+        first = np.searchsorted(low_x, x.min() - 3 * NEAR_CELLS, side="left")
+        last = np.searchsorted(low_x, x.max() + NEAR_CELLS, side="right")
+        reach = np.concatenate([wide, small[first:last]])
+        near = reach[near_triangles(queries[batch], boxes[0][reach], boxes[1][reach])]
+        if len(near) == 0:  # not surface cells after all: search the whole mesh
+            near = np.arange(len(faces))
+        mesh = trimesh.Trimesh(frame_vertices, faces[np.sort(near)], process=False)
+        closest[batch] = trimesh.proximity.closest_point(mesh, queries[batch])[0]
     return closest
 
 
-def near_triangles(queries, frame_vertices, faces, rings: int = NEAR_CELLS) -> np.ndarray:
-    """(F,) bool: triangles whose bounding box reaches a cell within ``rings`` cells
-    (Chebyshev) of a query's cell. A box no wider than ``2 rings`` cells meets such a block of
-    ``2 rings + 1`` cells only with one of its corners inside, so small triangles are tested by
-    their box's 8 corners; wider ones are always kept."""
+def near_triangles(queries, box_lo, box_hi, rings: int = NEAR_CELLS) -> np.ndarray:
+    """(F,) bool: triangles whose cell box (``box_lo``, ``box_hi``: (F, 3) floor of their
+    corners' min and max, lattice frame) reaches a cell within ``rings`` cells (Chebyshev) of a
+    query's cell. A box no wider than ``2 rings`` cells meets such a block of ``2 rings + 1``
+    cells only with one of its corners inside, so small triangles are tested by their box's 8
+    corners; wider ones are always kept."""
     cells = np.floor(queries).astype(np.int64)  # (Q, 3)
-    lo_all = cells.min(axis=0) - rings
-    shape = cells.max(axis=0) + rings - lo_all + 1
+    origin = cells.min(axis=0) - rings
+    shape = cells.max(axis=0) + rings - origin + 1
     marked = np.zeros(shape, dtype=bool)
     for offset in np.ndindex(*(2 * rings + 1,) * 3):  # (2 rings + 1)^3 shifts, not per query
-        index = cells - lo_all + np.asarray(offset) - rings
+        index = cells - origin + np.asarray(offset) - rings
         marked[index[:, 0], index[:, 1], index[:, 2]] = True
-    triangles = frame_vertices[faces]  # (F, 3, 3)
-    lo, hi = np.floor(triangles.min(axis=1)), np.floor(triangles.max(axis=1))  # (F, 3)
-    wide = np.any(hi - lo > 2 * rings, axis=1)
-    near = wide.copy()
+    near = np.any(box_hi - box_lo > 2 * rings, axis=1)
     for corner in np.ndindex(2, 2, 2):
-        point = np.where(np.array(corner, dtype=bool), hi, lo).astype(np.int64) - lo_all
+        point = np.where(np.array(corner, dtype=bool), box_hi, box_lo).astype(np.int64) - origin
         inside = np.all((point >= 0) & (point < shape), axis=1)
-        hit = np.zeros(len(faces), dtype=bool)
-        hit[inside] = marked[tuple(point[inside].T)]
-        near |= hit
+        near[inside] |= marked[tuple(point[inside].T)]
     return near

@@ -210,5 +210,23 @@ def test_closest_points_searched_near_the_queries_are_the_closest_of_the_whole_m
     whole = trimesh.Trimesh(frame, mesh.faces, process=False)
     expected = trimesh.proximity.closest_point(whole, queries)[0]
     np.testing.assert_array_equal(_closest_surface_points(queries, frame, mesh.faces), expected)
-    near = near_triangles(queries, frame, mesh.faces)
+    triangles = frame[mesh.faces]
+    near = near_triangles(queries, np.floor(triangles.min(axis=1)),
+                          np.floor(triangles.max(axis=1)))
     assert 0 < near.sum() < 0.2 * len(mesh.faces)
+
+
+def test_closest_points_in_batches_are_the_same(monkeypatch):
+    from agndc_core import labels
+
+    mesh = sphere(subdivisions=4)
+    directions = np.random.default_rng(1).normal(size=(50, 3))
+    queries = directions / np.linalg.norm(directions, axis=1, keepdims=True) * 20 + 20.3
+    frame = mesh.vertices * 20 + 20
+    whole = labels._closest_surface_points(queries, frame, mesh.faces)
+    monkeypatch.setattr(labels, "QUERY_CHUNK", 7)
+    calls = []
+    batched = labels._closest_surface_points(queries, frame, mesh.faces,
+                                             check=lambda: calls.append(1))
+    np.testing.assert_array_equal(batched, whole)
+    assert len(calls) == 8
