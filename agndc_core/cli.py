@@ -136,6 +136,13 @@ def _add_remesh_options(p) -> None:
                    help="mesh input, dual methods: use the voxel grid alone (by default the "
                         "faces that bound the mesh are put on its bounding box, which the grid "
                         "cannot place within a voxel, and no vertex lies beyond it)")
+    p.add_argument("--decimate-error", type=float, metavar="VOXELS",
+                   help="low poly: merge flat regions into large triangles, keeping creases and "
+                        "a closed mesh, with the surface moved by at most VOXELS voxels (e.g. "
+                        "0.25; docs/low-poly.md)")
+    p.add_argument("--target-faces", type=int, metavar="N",
+                   help="low poly: decimate to about N faces (at most N; with --decimate-error "
+                        "the bound stops it first)")
 
 
 def _add_normal_filter_option(p) -> None:
@@ -172,7 +179,9 @@ def _cmd_remesh(args) -> int:
                              min_component_faces=args.min_component_faces,
                              flat_patches=args.flat_patches,
                              normal_filter=args.normal_filter,
-                             source_bounds=args.source_bounds)
+                             source_bounds=args.source_bounds,
+                             decimate_error=args.decimate_error,
+                             target_faces=args.target_faces)
     finally:
         bar.close()
     save_mesh(result.vertices, result.faces, args.output)
@@ -204,7 +213,9 @@ def _cmd_batch(args) -> int:
                            device=args.device, min_component_faces=args.min_component_faces,
                            flat_patches=args.flat_patches,
                            normal_filter=args.normal_filter,
-                           source_bounds=args.source_bounds)
+                           source_bounds=args.source_bounds,
+                           decimate_error=args.decimate_error,
+                           target_faces=args.target_faces)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
