@@ -48,7 +48,8 @@ SEED = 0
 
 
 def decimate(vertices, faces, *, max_error: float | None = None,
-             target_faces: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+             target_faces: int | None = None,
+             max_tolerance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Fewer, larger triangles on flat regions; creases, corners and the topology kept.
 
     Args:
@@ -58,6 +59,9 @@ def decimate(vertices, faces, *, max_error: float | None = None,
             from sample points of each surface to the other (``surface_deviation``).
         target_faces: stop at about this many faces (at most this many, unless the mesh cannot
             be simplified that far, or ``max_error`` is reached first).
+        max_tolerance: the largest simplify tolerance the search for ``target_faces`` may use
+            (default: the mesh's diagonal). Beyond about a voxel the face count rises again
+            and then falls only as features vanish, so ``pipeline.remesh`` passes one voxel.
 
     Returns:
         vertices (V', 3) float64 and faces (F', 3) int64; the input itself when neither option
@@ -76,7 +80,8 @@ def decimate(vertices, faces, *, max_error: float | None = None,
     if max_error is not None:
         tolerance = _tolerance_within(manifold, vertices, faces, float(max_error))
     if target_faces is not None:
-        tolerance = _tolerance_for_faces(manifold, vertices, int(target_faces), tolerance)
+        upper = tolerance if max_tolerance is None else min(tolerance, max_tolerance)
+        tolerance = _tolerance_for_faces(manifold, vertices, int(target_faces), upper)
     if tolerance <= 0:
         return vertices, faces
     out_vertices, out_faces = _simplified(manifold, tolerance)
@@ -137,20 +142,20 @@ def _tolerance_for_faces(manifold, vertices, target: int, upper: float) -> float
 
     The face count falls with the tolerance only up to about a voxel: larger tolerances let
     early collapses block later ones and leave more faces (measured on a 128³ CAD part: 1,526
-    faces at 1 voxel, 7,702 at 16). So the tolerance doubles from a tiny one until the count
-    first reaches the target, then is bisected between the last two; when no tolerance reaches
-    it, the one with the fewest faces is returned.
+    faces at 1 voxel, 7,702 at 16). So the tolerance doubles from a tiny one up to ``upper``
+    until the count first reaches the target, then is bisected between the last two; when no
+    tolerance reaches it, the one with the fewest faces is returned.
     """
     extent = float(np.linalg.norm(np.ptp(vertices, axis=0)))
     upper = min(upper, extent)
-    tolerance, previous = upper * 2.0 ** -TARGET_STEPS, 0.0
-    fewest = (manifold.num_tri(), 0.0)
-    while tolerance <= upper:
+    tolerances = upper * 2.0 ** -np.arange(TARGET_STEPS, -1, -1.0)  # rising, ends at upper
+    previous, fewest = 0.0, (manifold.num_tri(), 0.0)
+    for tolerance in tolerances:
         count = manifold.simplify(tolerance).num_tri()
         if count <= target:
             return _bisect_tolerance(manifold, target, previous, tolerance)
         fewest = min(fewest, (count, tolerance))
-        previous, tolerance = tolerance, tolerance * 2.0
+        previous = tolerance
     return fewest[1]
 
 

@@ -52,6 +52,10 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     METHODS,
 )
 
+#: largest simplify tolerance (voxels) a target face count may use: beyond about a voxel the
+#: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
+TARGET_TOLERANCE = 1.0
+
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10
@@ -200,7 +204,8 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
 
         # lattice coordinates: one unit is one voxel along each axis
         vertices, faces = stages.run("low poly", 0.98, decimate, vertices, faces,
-                                     max_error=decimate_error, target_faces=target_faces)
+                                     max_error=decimate_error, target_faces=target_faces,
+                                     max_tolerance=TARGET_TOLERANCE)
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:
