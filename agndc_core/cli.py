@@ -139,7 +139,7 @@ def _add_remesh_options(p) -> None:
     p.add_argument("--decimate-error", type=float, metavar="VOXELS",
                    help="low poly: merge flat regions into large triangles, keeping creases and "
                         "a closed mesh, with the surface moved by at most VOXELS voxels (e.g. "
-                        "0.25; docs/low-poly.md)")
+                        "0.25; docs/experiments/low-poly.md)")
     p.add_argument("--target-faces", type=int, metavar="N",
                    help="low poly: decimate to about N faces (at most N; with --decimate-error "
                         "the bound stops it first)")
