@@ -89,12 +89,12 @@ def voxel_for_faces(obj, h: float, target: int):
 
 def run_mesh(name, vertices, faces, resolution, save: Path | None) -> list[dict]:
     """Every method's row for one mesh."""
-    import bpy
-    from compare_voxel_remesh import mesh_object, voxel_size
+    from compare_voxel_remesh import _bpy, mesh_object, voxel_size
 
     from agndc_core.decimate import decimate
     from agndc_core.pipeline import TARGET_TOLERANCE, remesh_mesh
 
+    bpy = _bpy()  # a temporary Blender user folder unless one is set
     bpy.ops.wm.read_homefile(use_empty=True)
     start = time.perf_counter()
     result = remesh_mesh(vertices, faces, resolution=resolution, method="agndc")
