@@ -9,10 +9,11 @@ Its output is an oriented closed 2-manifold by construction, and its vertices ar
 the input's.
 
 The tolerance bounds each collapse, not their sum, so the surface can drift further than the
-tolerance (measured: up to 2.6x at 0.5 voxels on a 128³ CAD part). ``max_error`` is therefore
-checked against the measured deviation (``surface_deviation``: sample points of each surface to
-the other, both ways) and the tolerance is lowered until it holds. ``target_faces`` is met by
-bisecting the tolerance (each simplify is one vectorised C++ call, ~0.1 s for 80k faces).
+tolerance (measured on fandisk's 128³ surface-nets mesh: 2.6x at 0.5 voxels). ``max_error`` is
+therefore checked against the measured deviation (``surface_deviation``: sample points of each
+surface to the other, both ways) and the tolerance searched for the largest that keeps it.
+``target_faces`` is met by bisecting the tolerance (each simplify is one vectorised C++ call,
+~0.1 s for 80k faces).
 
 Every result is checked (``meshcheck``: closed, 2-manifold, consistently wound, same orientation
 as the input); one that is not is replaced by the input mesh, with a logged warning.
@@ -37,11 +38,13 @@ ERROR_ATTEMPTS = 6
 #: the search for ``max_error``'s tolerance stops when the tolerances that fit and fail are
 #: this close (ratio)
 ERROR_STEP = 1.3
-#: the face-count search starts at 2^-TARGET_STEPS of the diagonal (~0.002 voxels at 128³)
+#: the face-count search starts at 2^-TARGET_STEPS of its largest tolerance (one voxel in
+#: ``pipeline.remesh``)
 TARGET_STEPS = 16
 #: nearest surface samples whose triangles are candidates for a point's closest triangle
 CANDIDATES = 8
-#: surface samples per input face for the candidate search (~2 per voxel face of a remesh)
+#: random samples of the coarser surface per face of the finer one (a remesh has two faces
+#: per voxel face: about one sample per voxel face)
 SAMPLES_PER_FACE = 0.5
 #: seed of the surface samples: the same mesh and options give the same result
 SEED = 0

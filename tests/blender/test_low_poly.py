@@ -77,3 +77,27 @@ def test_low_poly_grid_import(addon, tmp_path):
     result = bpy.data.objects["part_MC"]
     assert 0 < len(result.data.polygons) <= 2300
     _assert_closed(result)
+
+
+def test_low_poly_in_the_batch_script(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from agndc_core.gridio import load_mesh, save_mesh
+    from conftest import RELEASE_ZIP, ROOT
+
+    folder = tmp_path / "in"
+    folder.mkdir()
+    save_mesh(*cad_part(), folder / "part.obj")
+    env = dict(os.environ) if RELEASE_ZIP else dict(os.environ,
+                                                    BLENDER_USER_RESOURCES=str(tmp_path / "user"))
+    out = tmp_path / "out"
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "agndc_batch.py"), "--",
+                             "--input", str(folder), "--output", str(out), "--res", str(RES),
+                             "--method", "mc", "--target-faces", "2300"],
+                            env=env, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr + result.stdout
+    vertices, faces = load_mesh(out / "part_MC.obj")
+    assert 0 < len(faces) <= 2300
+    assert not any(topology_violations(vertices, faces).values())
