@@ -178,3 +178,17 @@ def test_cli_low_poly_flags(tmp_path):
                  "--target-faces", "500"]) == 0
     assert len(load_mesh(out)[1]) <= 500
     assert main(["remesh", str(source), "-o", str(out), "--target-faces", "2"]) == 2
+
+
+def test_batch_low_poly(tmp_path):
+    from agndc_core.batch import remesh_many
+    from agndc_core.gridio import load_mesh
+
+    source = tmp_path / "box.stl"
+    box((1.0, 0.6, 0.4)).export(source)
+    rows = remesh_many([source], tmp_path / "out", method="sharp", resolution=24, workers=1,
+                       decimate_error=0.1)
+    assert rows[0]["status"] == "ok" and int(rows[0]["faces"]) == 12
+    assert len(load_mesh(tmp_path / "out" / "box.ply")[1]) == 12
+    with pytest.raises(AGNDCError, match="low poly"):
+        remesh_many([source], tmp_path / "out2", method="mc", workers=1, target_faces=2)
