@@ -65,7 +65,8 @@ PLATFORM_TAGS = {
 #: what agndc_core imports at run time in Blender; numpy is Blender's own. scipy: distance
 #: transforms, sparse components, KD-trees; scikit-image: marching cubes; trimesh and rtree:
 #: Taubin smoothing and sharp mode's closest-point query; nibabel: NIfTI grids; threadpoolctl:
-#: one BLAS thread per inference worker. No torch: the networks run in numpy.
+#: one BLAS thread per inference worker; manifold3d: Low Poly's decimation (decimate.py, ~1 MB
+#: wheels). No torch: the networks run in numpy.
 RUNTIME_REQUIREMENTS = [
     "scipy>=1.11",
     "scikit-image>=0.22",
@@ -73,6 +74,7 @@ RUNTIME_REQUIREMENTS = [
     "rtree>=1.0",
     "nibabel>=5.0",
     "threadpoolctl>=3.1",
+    "manifold3d>=3.0",
 ]
 #: resolution constraints per Python: pick wheels that work with the numpy Blender ships
 #: (Blender 4.2-5.0: numpy 1.x, bpy 4.5/5.0 pin numpy>=1.26,<2; bpy 5.2.3 (cp313) pins
@@ -92,7 +94,8 @@ PRODUCT_MODULES = (
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
     "quads.py",
     "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
-    "batch_job.py", "batch_dask.py", "colors.py", "formats", "runtime", "weights",
+    "batch_job.py", "batch_dask.py", "colors.py", "decimate.py", "meshcheck.py", "formats",
+    "runtime", "weights",
     "nn/__init__.py", "nn/config.py", "nn/layout.py",
 )
 

@@ -27,6 +27,9 @@ from .properties import (
     OPERATOR,
     VOX_ITEMS,
     compare_mc_property,
+    low_poly_mode_property,
+    low_poly_property,
+    max_error_property,
     method_property,
     normal_filter_property,
     output_property,
@@ -34,6 +37,7 @@ from .properties import (
     resolution_property,
     size_mode_property,
     smooth_property,
+    target_faces_property,
     threads_property,
     use_modifiers_property,
     voxel_size_property,
@@ -41,7 +45,8 @@ from .properties import (
 
 #: names shared by the operator properties and the scene settings
 SETTING_NAMES = ("size_mode", "voxel_size", "resolution", "method", "normal_filter",
-                 "use_modifiers", "output", "compare_mc", "quads", "smooth", "threads")
+                 "use_modifiers", "output", "compare_mc", "quads", "smooth", "threads",
+                 "low_poly", "low_poly_mode", "max_error", "target_faces")
 GRID_EXTENSIONS = (".npy", ".npz", ".binvox", ".vox", ".nii", ".nii.gz")
 GRID_FILTER = ";".join(f"*{ext}" for ext in GRID_EXTENSIONS)
 #: seconds between modal updates (progress bar, status bar, worker check)
@@ -170,6 +175,7 @@ class _RemeshOperatorMixin:
             voxel_size=values["voxel_size"] if values.get("size_mode") == "VOXEL_SIZE" else 0.0,
             method=values["method"], threads=threads,
             normal_filter=values["normal_filter"],
+            **low_poly_settings(values),
             compare_mc=values["compare_mc"], smooth=values["smooth"], quads=values["quads"],
             use_modifiers=values.get("use_modifiers", True),
             replace_source=values.get("output") == "REPLACE",
@@ -298,6 +304,10 @@ class OBJECT_OT_agndc_remesh(_RemeshOperatorMixin, bpy.types.Operator):
     resolution: resolution_property(**OPERATOR)
     method: method_property(**OPERATOR)
     normal_filter: normal_filter_property(**OPERATOR)
+    low_poly: low_poly_property(**OPERATOR)
+    low_poly_mode: low_poly_mode_property(**OPERATOR)
+    max_error: max_error_property(**OPERATOR)
+    target_faces: target_faces_property(**OPERATOR)
     use_modifiers: use_modifiers_property(**OPERATOR)
     output: output_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
@@ -361,6 +371,10 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
     files: CollectionProperty(type=OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
     method: method_property(GRID_METHOD_ITEMS, **OPERATOR)
     normal_filter: normal_filter_property(**OPERATOR)
+    low_poly: low_poly_property(**OPERATOR)
+    low_poly_mode: low_poly_mode_property(**OPERATOR)
+    max_error: max_error_property(**OPERATOR)
+    target_faces: target_faces_property(**OPERATOR)
     compare_mc: compare_mc_property(**OPERATOR)
     quads: quads_property(**OPERATOR)
     smooth: smooth_property(**OPERATOR)
@@ -458,6 +472,14 @@ class AGNDC_FH_voxel_grid(bpy.types.FileHandler):
         return area is not None and area.type in {"VIEW_3D", "OUTLINER"}
 
 
+def low_poly_settings(values: dict) -> dict:
+    """``remesh.Settings``' decimation fields from the Low Poly properties (None: off)."""
+    on = values.get("low_poly", False)
+    by_error = values.get("low_poly_mode") == "ERROR"
+    return {"decimate_error": values["max_error"] if on and by_error else None,
+            "target_faces": values["target_faces"] if on and not by_error else None}
+
+
 def draw_settings(layout, data, mesh: bool) -> None:
     """The settings of ``data`` (scene settings or an operator), for the sidebar, the redo panel
     and the import dialog."""
@@ -468,6 +490,11 @@ def draw_settings(layout, data, mesh: bool) -> None:
     learned = col.column()
     learned.active = data.method in ("agndc", "undc")  # the filter acts on a network's mesh
     learned.prop(data, "normal_filter")
+    col.prop(data, "low_poly")
+    low_poly = col.column()
+    low_poly.active = data.low_poly
+    low_poly.prop(data, "low_poly_mode")
+    low_poly.prop(data, "max_error" if data.low_poly_mode == "ERROR" else "target_faces")
     if mesh:
         col.prop(data, "size_mode")
         col.prop(data, "voxel_size" if data.size_mode == "VOXEL_SIZE" else "resolution")
@@ -485,7 +512,8 @@ def draw_settings(layout, data, mesh: bool) -> None:
     sub.active = data.method != "mc" and not (mesh and data.output == "REPLACE")
     sub.prop(data, "compare_mc")
     quads = col.column()
-    quads.active = data.method != "mc"  # marching cubes makes triangles only
+    # marching cubes and a decimated mesh are triangles only
+    quads.active = data.method != "mc" and not data.low_poly
     quads.prop(data, "quads")
     col.prop(data, "smooth")
     col.prop(data, "threads")

@@ -36,6 +36,11 @@ OUTPUT_ITEMS = (
      "is hidden, not deleted (Ctrl Z undoes)"),
 )
 
+LOW_POLY_ITEMS = (
+    ("ERROR", "Max Error", "Decimate as far as the surface moves by at most Max Error voxels"),
+    ("FACES", "Target Faces", "Decimate to about Target Faces faces (at most that many)"),
+)
+
 VOX_ITEMS = (
     ("INDEX", "One Model", "Import the model at Model Index"),
     ("ALL", "All Models", "Import every model of the file as its own object"),
@@ -107,6 +112,34 @@ def quads_property(**extra):
                         default=False, **extra)
 
 
+def low_poly_property(**extra):
+    return BoolProperty(name="Low Poly",
+                        description="Merge flat regions into a few large triangles, keeping "
+                        "sharp edges and a closed mesh (decimation of the result; the Compare "
+                        "with MC mesh stays full)",
+                        default=False, **extra)
+
+
+def low_poly_mode_property(**extra):
+    return EnumProperty(name="Decimate To", description="What stops the decimation",
+                        items=LOW_POLY_ITEMS, default="ERROR", **extra)
+
+
+def max_error_property(**extra):
+    return FloatProperty(name="Max Error (voxels)",
+                         description="Largest distance the surface may move, in voxels of the "
+                         "grid (0.25: flat and gently curved regions merge, details stay)",
+                         default=0.25, min=0.01, max=10.0, soft_max=2.0, step=5, precision=2,
+                         **extra)
+
+
+def target_faces_property(**extra):
+    return IntProperty(name="Target Faces",
+                       description="Faces of the result (at most this many; exactly flat regions "
+                       "merge whatever the target)",
+                       default=5000, min=4, soft_max=200_000, **extra)
+
+
 def smooth_property(**extra):
     return BoolProperty(name="Smooth Shading", description="Shade the new objects smooth",
                         default=False, **extra)
@@ -130,6 +163,10 @@ class AGNDC_RemeshSettings(bpy.types.PropertyGroup):
     resolution: resolution_property()
     method: method_property()
     normal_filter: normal_filter_property()
+    low_poly: low_poly_property()
+    low_poly_mode: low_poly_mode_property()
+    max_error: max_error_property()
+    target_faces: target_faces_property()
     use_modifiers: use_modifiers_property()
     output: output_property()
     compare_mc: compare_mc_property()

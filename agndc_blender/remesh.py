@@ -73,6 +73,8 @@ class Settings:
     resolution: int = 64  # voxels along the longest side, used when voxel_size is 0
     method: str = "agndc"
     normal_filter: bool = True  # learned methods: denoise the mesh, keeping creases (core remesh)
+    decimate_error: float | None = None  # Low Poly: surface moved by at most this many voxels
+    target_faces: int | None = None  # Low Poly: about this many faces (core decimate.py)
     threads: int = 0  # 0 = automatic
     compare_mc: bool = True
     smooth: bool = False
@@ -487,7 +489,8 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
     methods = settings.methods()
     options = dict(checkpoint=settings.checkpoint or None,
                    threads=resolve_threads(settings.threads), cancel=cancel,
-                   normal_filter=settings.normal_filter)
+                   normal_filter=settings.normal_filter,
+                   decimate_error=settings.decimate_error, target_faces=settings.target_faces)
     main_share = 0.75 if len(methods) > 1 else 0.9
     sub = pipeline.subrange
     if job.grid_path is not None:

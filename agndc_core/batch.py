@@ -358,7 +358,8 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
         fmt: "ply", "obj", "stl" or "glb".
         method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
-            min_component_faces, threads, flat_patches, normal_filter, source_bounds): as for
+            min_component_faces, threads, flat_patches, normal_filter, source_bounds,
+            decimate_error, target_faces): as for
             ``pipeline.remesh_file`` / ``agndc remesh``.
         workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
         engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).
@@ -428,6 +429,10 @@ def _check_arguments(options: BatchOptions, fmt, workers, engine, scheduler) -> 
         raise AGNDCError(f"workers must be at least 1, got {workers}")
     if options.voxel_size is not None and not options.voxel_size > 0:
         raise AGNDCError(f"voxel size must be positive, got {options.voxel_size}")
+    if options.decimate_error is not None or options.target_faces is not None:
+        from .decimate import check_options
+
+        check_options(options.decimate_error, options.target_faces)
     if options.method in CHECKPOINT_NAMES:  # fail before the workers start, not once per file
         from .checkpoint import default_checkpoint_path
 

@@ -35,6 +35,8 @@ class BatchOptions:
     flat_patches: bool = True  # learned methods: flat voxel-face patches come out flat
     normal_filter: bool = True  # learned methods: the mesh denoised, its creases kept
     source_bounds: bool = True  # dual methods on meshes: bounding faces on the mesh's box
+    decimate_error: float | None = None  # low poly: surface moved by at most this many voxels
+    target_faces: int | None = None  # low poly: about this many faces
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,9 @@ def run_job(job: Job, options: BatchOptions) -> dict:
                              min_component_faces=options.min_component_faces,
                              flat_patches=options.flat_patches,
                              normal_filter=options.normal_filter,
-                             source_bounds=options.source_bounds)
+                             source_bounds=options.source_bounds,
+                             decimate_error=options.decimate_error,
+                             target_faces=options.target_faces)
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         save_mesh(result.vertices, result.faces, job.output, **result_colors(result))
         row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),

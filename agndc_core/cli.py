@@ -57,7 +57,7 @@ def _parser() -> argparse.ArgumentParser:
                    help=".obj/.ply output of a dual method: join each planar, convex pair of "
                    "triangles of one dual-contouring quad into a quad, the rest stays "
                    "triangles (docs/quads.md); .stl/.glb and a coloured .ply hold triangles "
-                   "only, and marching cubes has no quads")
+                   "only, and marching cubes and low poly make no quads")
     p.add_argument("--per-label", action="store_true",
                    help="label maps (.nii .nii.gz .npy .npz): one mesh per label (each "
                    "positive value), written beside OUTPUT as <name>_label-<value>.<ext> "
@@ -153,6 +153,13 @@ def _add_remesh_options(p) -> None:
                    help="mesh input, dual methods: use the voxel grid alone (by default the "
                         "faces that bound the mesh are put on its bounding box, which the grid "
                         "cannot place within a voxel, and no vertex lies beyond it)")
+    p.add_argument("--decimate-error", type=float, metavar="VOXELS",
+                   help="low poly: merge flat regions into large triangles, keeping creases and "
+                        "a closed mesh, with the surface moved by at most VOXELS voxels (e.g. "
+                        "0.25; docs/experiments/low-poly.md)")
+    p.add_argument("--target-faces", type=int, metavar="N",
+                   help="low poly: decimate to about N faces (at most N; with --decimate-error "
+                        "the bound stops it first)")
 
 
 def _add_normal_filter_option(p) -> None:
@@ -206,7 +213,7 @@ def _quads_line(polygons, output: Path, no_quads: bool, colored: bool) -> str:
     from .gridio import polygon_extensions
 
     if no_quads:
-        return "--quads: marching cubes has no quads; triangles written"
+        return "--quads: marching cubes and low poly make triangles only; triangles written"
     if output.suffix.lower() not in polygon_extensions(colored):
         kind = "a coloured " if colored and output.suffix.lower() == ".ply" else ""
         return f"--quads: {kind}{output.suffix} holds triangles only; triangles written"
@@ -218,7 +225,8 @@ def _remesh_options(args) -> dict:
     """``pipeline.remesh``'s options from the flags of ``agndc remesh``."""
     return dict(checkpoint=args.checkpoint, threads=args.threads, device=args.device,
                 min_component_faces=args.min_component_faces, flat_patches=args.flat_patches,
-                normal_filter=args.normal_filter, source_bounds=args.source_bounds)
+                normal_filter=args.normal_filter, source_bounds=args.source_bounds,
+                decimate_error=args.decimate_error, target_faces=args.target_faces)
 
 
 def _result_line(result) -> str:
@@ -298,7 +306,9 @@ def _cmd_batch(args) -> int:
                            device=args.device, min_component_faces=args.min_component_faces,
                            flat_patches=args.flat_patches,
                            normal_filter=args.normal_filter,
-                           source_bounds=args.source_bounds)
+                           source_bounds=args.source_bounds,
+                           decimate_error=args.decimate_error,
+                           target_faces=args.target_faces)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -52,6 +52,10 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     METHODS,
 )
 
+#: largest simplify tolerance (voxels) a target face count may use: beyond about a voxel the
+#: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
+TARGET_TOLERANCE = 1.0
+
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10
@@ -123,7 +127,8 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
            min_component_faces: int = 0, device: str = "cpu",
            tile: int | None = None, progress=None, cancel=None, labels=None,
            reframe: bool = True, flat_patches: bool = True, normal_filter: bool = True,
-           source_bounds: bool = True) -> RemeshResult:
+           source_bounds: bool = True, decimate_error: float | None = None,
+           target_faces: int | None = None) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
     Args:
@@ -152,12 +157,21 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
             (``grid.source_bounds``): the flat patches that bound the shape lie on the mesh's
             bounding box (``flatpatches.snap_to_bounds``), so the result keeps the source's
             dimensions. False uses the grid alone, as a method given only the grid must.
+        decimate_error, target_faces: low poly (``decimate.py``): merge flat regions into
+            large triangles, keeping creases, with the surface moved by at most
+            ``decimate_error`` voxels and/or down to about ``target_faces`` faces. None: the
+            full mesh.
     """
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
     if method not in METHODS:
         raise AGNDCError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     grid.check_not_trivial()
+    low_poly = decimate_error is not None or target_faces is not None
+    if low_poly:
+        from .decimate import check_options
+
+        check_options(decimate_error, target_faces)  # before the long stages, not after
     stages = _Stages(progress, cancel)
     face_quads = None
     if method in ("mc", "mc_taubin"):
@@ -199,6 +213,14 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
         if method in CHECKPOINT_NAMES:  # a network's vertices: no component turned inside out
             vertices = stages.run("fold check", 0.97, unfold_components, vertices, faces,
                                   lattice, edge, min_component_faces)
+    if low_poly:
+        from .decimate import decimate
+
+        # lattice coordinates: one unit is one voxel along each axis
+        vertices, faces = stages.run("low poly", 0.98, decimate, vertices, faces,
+                                     max_error=decimate_error, target_faces=target_faces,
+                                     max_tolerance=TARGET_TOLERANCE)
+        face_quads = None  # decimated faces belong to no dual-contouring quad: triangles only
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
     if progress is not None:

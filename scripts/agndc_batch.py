@@ -52,6 +52,11 @@ def parse_args(argv):
     parser.add_argument("--no-normal-filter", action="store_true",
                         help="AGNDC/UNDC: keep the mesh as contoured (by default it is denoised, "
                         "creases kept: agndc_core/normalfilter.py)")
+    low_poly = parser.add_mutually_exclusive_group()
+    low_poly.add_argument("--decimate-error", type=float, metavar="VOXELS",
+                          help="Low Poly: decimate, the surface moved by at most VOXELS voxels")
+    low_poly.add_argument("--target-faces", type=int, metavar="N",
+                          help="Low Poly: decimate to at most N faces")
     parser.add_argument("--threads", type=int, default=0, help="CPU threads (0 = automatic)")
     parser.add_argument("--format", default=".obj", help="output mesh extension (default .obj)")
     parser.add_argument("--checkpoint", help="custom weights (.safetensors)")
@@ -144,7 +149,9 @@ def main(argv) -> int:
     settings = remesh.Settings(resolution=args.res, method=args.method, threads=args.threads,
                                compare_mc=args.compare_mc, checkpoint=args.checkpoint,
                                distance=not args.no_distance,
-                               normal_filter=not args.no_normal_filter)
+                               normal_filter=not args.no_normal_filter,
+                               decimate_error=args.decimate_error,
+                               target_faces=args.target_faces)
     if not args.input.exists():
         print(f"agndc_batch: error: {args.input}: no such file or folder", file=sys.stderr)
         return 2

@@ -183,8 +183,9 @@ def test_draw_functions(addon):
     for _, draw in panels.MENU_HOOKS:
         draw(fake, bpy.context)
     props = [name for kind, name in log if kind == "prop"]
-    assert props == ["method", "normal_filter", "size_mode", "resolution", "use_modifiers",
-                     "output", "compare_mc", "quads", "smooth", "threads"]
+    assert props == ["method", "normal_filter", "low_poly", "low_poly_mode", "max_error",
+                     "size_mode", "resolution", "use_modifiers", "output", "compare_mc",
+                     "quads", "smooth", "threads"]
     labels = [text for kind, text in log if kind == "label"]
     (grid,) = [re.fullmatch(r"Part: (\d+) × (\d+) × (\d+) voxels", t) for t in labels
                if t.startswith("Part: ")]

@@ -275,3 +275,16 @@ def test_cli_quads_writes_quads(tmp_path, capsys):
     sizes = np.bincount([len(f) for f in faces], minlength=5)
     assert sizes[4] >= 0.9 * len(faces)
     assert "% quads" in capsys.readouterr().out
+
+
+def test_a_decimated_mesh_is_triangles_only():
+    """Low poly's faces come from no dual-contouring quad: the result has no quad ids, and
+    polygons() gives its triangles unchanged."""
+    from agndc_core.pipeline import remesh
+
+    occupancy = np.zeros((14, 14, 14), dtype=bool)
+    occupancy[3:11, 3:11, 3:11] = True
+    result = remesh(occupancy, method="surfacenets", target_faces=50)
+    assert result.face_quads is None
+    polygons = result.polygons()
+    assert len(polygons.quads) == 0 and len(polygons.triangles) == len(result.faces)
