@@ -90,7 +90,7 @@ REFUSED = re.compile(r"^(torch|nvidia-.*|cuda-.*|triton|pytorch-triton.*)$")
 #: training and research wing. nn/ contributes only its torch-free config and layout.
 PRODUCT_MODULES = (
     "__init__.py", "py.typed", "errors.py", "grid.py", "gridio.py", "voxelize.py", "plan.py",
-    "labels.py", "labelmaps.py", "methods.py",
+    "labels.py", "labelmaps.py", "methods.py", "options.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
     "quads.py",
     "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",

@@ -38,6 +38,7 @@ from . import mesh_io
 from ._core import checkpoint as checkpoint_module
 from ._core import colors, errors, gridio, labelmaps, metrics, pipeline, plan, voxelize
 from ._core import methods as registry
+from ._core import options as options_module
 
 #: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
@@ -92,6 +93,14 @@ class Settings:
     def methods(self) -> list[str]:
         """The methods each input is reconstructed with (the result, then MC to compare)."""
         return run_methods(self.method, self.compare_mc, self.replace_source)
+
+    def remesh_options(self, resolution: int | None = None):
+        """The core's ``RemeshOptions`` of the chosen method (``resolution``: a mesh's)."""
+        return options_module.RemeshOptions(
+            method=self.method, resolution=resolution or self.resolution,
+            checkpoint=self.checkpoint or None, threads=resolve_threads(self.threads),
+            normal_filter=self.normal_filter, decimate_error=self.decimate_error,
+            target_faces=self.target_faces)
 
 
 def run_methods(method: str, compare_mc: bool, replace_source: bool) -> list[str]:
@@ -487,10 +496,7 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
             raise errors.CancelledError("Remesh cancelled")
 
     methods = settings.methods()
-    options = dict(checkpoint=settings.checkpoint or None,
-                   threads=resolve_threads(settings.threads), cancel=cancel,
-                   normal_filter=settings.normal_filter,
-                   decimate_error=settings.decimate_error, target_faces=settings.target_faces)
+    options = settings.remesh_options(job.resolution)
     main_share = 0.75 if len(methods) > 1 else 0.9
     sub = pipeline.subrange
     if job.grid_path is not None:
@@ -498,13 +504,12 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         grid = job.grid if job.grid is not None else _read_grid(job)
         job.grid = None  # the run holds it now; the job does not keep it alive
         check_cancel()
-        first = pipeline.remesh(grid, method=settings.method,
-                                progress=sub(progress, 0.0, main_share), **options)
+        first = pipeline.remesh(grid, options, progress=sub(progress, 0.0, main_share),
+                                cancel=cancel)
     else:
         try:
-            first = pipeline.remesh_mesh(job.vertices, job.faces, resolution=job.resolution,
-                                         method=settings.method, source=f"'{job.name}'",
-                                         progress=sub(progress, 0.0, main_share), **options)
+            first = pipeline.remesh_mesh(job.vertices, job.faces, options, source=f"'{job.name}'",
+                                         progress=sub(progress, 0.0, main_share), cancel=cancel)
         except errors.GridError as exc:
             if not job.open_edges:
                 raise

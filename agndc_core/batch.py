@@ -38,7 +38,6 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from .batch_job import (  # noqa: F401  (one job: defined there, part of this module's API)
-    BatchOptions,
     Job,
     failed_row,
     prepare_worker,
@@ -53,6 +52,7 @@ from .gridio import (
     is_grid_path,
     is_mesh_path,
 )
+from .options import RemeshOptions
 from .pipeline import CHECKPOINT_NAMES, METHODS
 
 CSV_NAME = "batch.csv"
@@ -198,13 +198,13 @@ def cpu_count() -> int:
 # --- engines --------------------------------------------------------------------------------
 
 
-def run_serial(jobs, options: BatchOptions, on_row, func=run_job) -> None:
+def run_serial(jobs, options: RemeshOptions, on_row, func=run_job) -> None:
     """Every job in this process, one after another."""
     for job in jobs:
         on_row(func(job, options))
 
 
-def run_pool(jobs, options: BatchOptions, workers: int, on_row, func=run_job) -> None:
+def run_pool(jobs, options: RemeshOptions, workers: int, on_row, func=run_job) -> None:
     """Every job in a pool of ``workers`` processes; ``on_row`` (in this process) gets the rows.
 
     At most ``IN_FLIGHT_PER_WORKER * workers`` jobs are handed out at a time. When a worker dies
@@ -244,14 +244,14 @@ def run_pool(jobs, options: BatchOptions, workers: int, on_row, func=run_job) ->
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _new_pool(workers: int, options: BatchOptions, threads: int) -> ProcessPoolExecutor:
+def _new_pool(workers: int, options: RemeshOptions, threads: int) -> ProcessPoolExecutor:
     # spawn, not fork: a forked copy of a process that has started torch's thread pools can hang
     return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_init_pool_worker,
                                initargs=(options, threads, os.getpid()))
 
 
-def _run_alone(job: Job, options: BatchOptions, threads: int, func) -> dict:
+def _run_alone(job: Job, options: RemeshOptions, threads: int, func) -> dict:
     """A suspect job of a broken pool, alone in a fresh process: its row, or a failed row if
     that process dies too."""
     pool = _new_pool(1, options, threads)
@@ -267,7 +267,7 @@ def _run_alone(job: Job, options: BatchOptions, threads: int, func) -> dict:
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def _init_pool_worker(options: BatchOptions, threads: int, parent_pid: int) -> None:
+def _init_pool_worker(options: RemeshOptions, threads: int, parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     _exit_with_parent(parent_pid)
     try:
@@ -347,20 +347,18 @@ def write_rows(path, rows, fields=CSV_FIELDS) -> None:
     os.replace(temp, path)
 
 
-def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
-                resolution: int = 64, voxel_size: float | None = None,
+def remesh_many(inputs, out_dir, options: RemeshOptions | None = None, *, fmt: str = "ply",
                 workers: int | None = None, engine: str = "local", scheduler: str | None = None,
-                overwrite: bool = False, progress: bool = False, **options) -> list[dict]:
+                overwrite: bool = False, progress: bool = False, **changes) -> list[dict]:
     """Remesh every input (files, folders, manifests) into ``out_dir``; the rows of batch.csv.
 
     Args:
         inputs: paths of files, folders (recursive) and manifests; see the module docstring.
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
         fmt: "ply", "obj", "stl" or "glb".
-        method, resolution, voxel_size, and ``options`` (model_index, checkpoint, device,
-            min_component_faces, threads, flat_patches, normal_filter, source_bounds,
-            decimate_error, target_faces): as for
-            ``pipeline.remesh_file`` / ``agndc remesh``.
+        options: the ``RemeshOptions`` of every file, with ``changes`` to its fields, as for
+            ``pipeline.remesh_file`` / ``agndc remesh`` (``threads``: per job; None = the
+            worker's share of the cores).
         workers: processes (local pool, or a Dask LocalCluster); None = the CPU cores.
         engine: "local" or "dask"; scheduler: a Dask scheduler address (None = a LocalCluster).
         overwrite: redo outputs that are already there and up to date.
@@ -370,9 +368,9 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
         One dict per input, in input order, with the CSV_FIELDS keys; status "ok", "failed"
         (error says why) or "skipped". Bad inputs never raise; bad arguments raise AGNDCError.
     """
-    if options.get("checkpoint"):  # absolute: workers may run in another folder or host
-        options["checkpoint"] = os.path.abspath(options["checkpoint"])
-    batch = BatchOptions(method=method, resolution=resolution, voxel_size=voxel_size, **options)
+    batch = RemeshOptions.of(options, **changes)
+    if batch.checkpoint:  # absolute: workers may run in another folder or host
+        batch = RemeshOptions.of(batch, checkpoint=os.path.abspath(batch.checkpoint))
     workers = cpu_count() if workers is None else workers
     _check_arguments(batch, fmt, workers, engine, scheduler)
     out_dir = Path(out_dir)
@@ -416,7 +414,7 @@ def remesh_many(inputs, out_dir, *, fmt: str = "ply", method: str = "agndc",
     return ordered
 
 
-def _check_arguments(options: BatchOptions, fmt, workers, engine, scheduler) -> None:
+def _check_arguments(options: RemeshOptions, fmt, workers, engine, scheduler) -> None:
     if fmt not in OUTPUT_FORMATS:
         raise AGNDCError(f"output format {fmt!r}: choose one of {', '.join(OUTPUT_FORMATS)}")
     if options.method not in METHODS:

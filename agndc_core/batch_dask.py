@@ -14,8 +14,9 @@ from __future__ import annotations
 
 from collections import Counter
 
-from .batch_job import BatchOptions, failed_row, prepare_worker, run_job
+from .batch_job import failed_row, prepare_worker, run_job
 from .errors import AGNDCError
+from .options import RemeshOptions
 
 try:
     import dask
@@ -42,7 +43,7 @@ class PrepareWorker(WorkerPlugin):
     hosts that join later count this worker's own threads), so the host is not oversubscribed.
     """
 
-    def __init__(self, options: BatchOptions, host_threads: dict[str, int]):
+    def __init__(self, options: RemeshOptions, host_threads: dict[str, int]):
         self.options, self.host_threads = options, host_threads
 
     def setup(self, worker) -> None:
@@ -54,7 +55,7 @@ class PrepareWorker(WorkerPlugin):
             pass  # each task meets the same error in remesh and reports it in its own row
 
 
-def run_dask(jobs, options: BatchOptions, workers: int, scheduler: str | None, on_row) -> None:
+def run_dask(jobs, options: RemeshOptions, workers: int, scheduler: str | None, on_row) -> None:
     """Run ``jobs`` on the cluster at ``scheduler``, or on a new ``LocalCluster`` of ``workers``
     single-threaded processes; ``on_row`` gets each row as its task ends."""
     if not jobs:

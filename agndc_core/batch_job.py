@@ -15,28 +15,10 @@ import numpy as np
 from .colors import result_colors
 from .errors import AGNDCError
 from .gridio import save_mesh
+from .options import RemeshOptions
 from .pipeline import MESH_ONLY_METHODS, remesh, remesh_file
 
 _PREPARED: dict = {}  # per process: the (options, threads) a worker was prepared for
-
-
-@dataclass(frozen=True)
-class BatchOptions:
-    """How every file of a batch is remeshed (``pipeline.remesh_file`` arguments; picklable)."""
-
-    method: str = "agndc"
-    resolution: int = 64  # voxels on a mesh's longest side (grids are used as they are)
-    voxel_size: float | None = None  # instead of resolution: voxels of at most this size
-    model_index: int = 0  # .vox files: which model
-    checkpoint: str | None = None  # learned methods: None = the shipped weights
-    device: str = "cpu"
-    min_component_faces: int = 0
-    threads: int | None = None  # network threads per job; None = the worker's share of the cores
-    flat_patches: bool = True  # learned methods: flat voxel-face patches come out flat
-    normal_filter: bool = True  # learned methods: the mesh denoised, its creases kept
-    source_bounds: bool = True  # dual methods on meshes: bounding faces on the mesh's box
-    decimate_error: float | None = None  # low poly: surface moved by at most this many voxels
-    target_faces: int | None = None  # low poly: about this many faces
 
 
 @dataclass(frozen=True)
@@ -49,7 +31,7 @@ class Job:
 
 
 
-def run_job(job: Job, options: BatchOptions) -> dict:
+def run_job(job: Job, options: RemeshOptions) -> dict:
     """Remesh one file and write its output; a row for batch.csv. Bad input is a failed row.
 
     The output is written through ``gridio.save_mesh`` (temporary name, then an atomic rename).
@@ -58,17 +40,8 @@ def run_job(job: Job, options: BatchOptions) -> dict:
     start = time.perf_counter()
     row = {"input": job.input, "output": job.output, "method": options.method}
     try:
-        result = remesh_file(job.input, method=options.method, resolution=options.resolution,
-                             voxel_size=options.voxel_size, model_index=options.model_index,
-                             checkpoint=options.checkpoint,
-                             threads=options.threads or _PREPARED.get("threads"),
-                             device=options.device,
-                             min_component_faces=options.min_component_faces,
-                             flat_patches=options.flat_patches,
-                             normal_filter=options.normal_filter,
-                             source_bounds=options.source_bounds,
-                             decimate_error=options.decimate_error,
-                             target_faces=options.target_faces)
+        result = remesh_file(job.input, options,
+                             threads=options.threads or _PREPARED.get("threads"))
         Path(job.output).parent.mkdir(parents=True, exist_ok=True)
         save_mesh(result.vertices, result.faces, job.output, **result_colors(result))
         row.update(grid="x".join(str(n) for n in result.grid.shape), faces=len(result.faces),
@@ -81,13 +54,13 @@ def run_job(job: Job, options: BatchOptions) -> dict:
     return row
 
 
-def failed_row(job: Job, options: BatchOptions, error: str) -> dict:
+def failed_row(job: Job, options: RemeshOptions, error: str) -> dict:
     """The row of a job that ended without its own row (its worker died)."""
     return {"input": job.input, "output": job.output, "method": options.method,
             "status": "failed", "error": error}
 
 
-def prepare_worker(options: BatchOptions, threads: int | None) -> None:
+def prepare_worker(options: RemeshOptions, threads: int | None) -> None:
     """Once per worker process: the network's share of the cores, and a warm-up remesh of a 2x2x2
     grid, which imports what the method needs and loads its network into ``pipeline``'s
     per-process model cache, so no job loads or receives it again (and a job's seconds are its

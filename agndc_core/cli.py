@@ -14,6 +14,7 @@ from pathlib import Path
 
 from .errors import AGNDCError
 from .methods import METHODS, REGISTRY
+from .options import RemeshOptions
 
 
 def main(argv=None) -> int:
@@ -193,9 +194,7 @@ def _cmd_remesh(args) -> int:
     bar, update = _progress_bar(args.input.name)
     try:
         with _merged_labels_hint():
-            result = remesh_file(args.input, method=args.method, resolution=args.res,
-                                 voxel_size=args.voxel_size, model_index=args.model_index,
-                                 progress=update, **_remesh_options(args))
+            result = remesh_file(args.input, options_from_args(args), progress=update)
     finally:
         bar.close()
     colors = result_colors(result) if args.colors else {}
@@ -221,12 +220,17 @@ def _quads_line(polygons, output: Path, no_quads: bool, colored: bool) -> str:
             f"({100 * polygons.quad_fraction:.1f} % quads)")
 
 
-def _remesh_options(args) -> dict:
-    """``pipeline.remesh``'s options from the flags of ``agndc remesh``."""
-    return dict(checkpoint=args.checkpoint, threads=args.threads, device=args.device,
-                min_component_faces=args.min_component_faces, flat_patches=args.flat_patches,
-                normal_filter=args.normal_filter, source_bounds=args.source_bounds,
-                decimate_error=args.decimate_error, target_faces=args.target_faces)
+def options_from_args(args) -> RemeshOptions:
+    """The ``RemeshOptions`` of ``agndc remesh`` / ``agndc batch``'s flags (``_add_remesh_options``
+    names each flag after its field)."""
+    checkpoint = str(args.checkpoint) if args.checkpoint else None
+    return RemeshOptions(method=args.method, resolution=args.res, voxel_size=args.voxel_size,
+                         model_index=args.model_index, checkpoint=checkpoint,
+                         device=args.device, threads=args.threads,
+                         min_component_faces=args.min_component_faces,
+                         flat_patches=args.flat_patches, normal_filter=args.normal_filter,
+                         source_bounds=args.source_bounds, decimate_error=args.decimate_error,
+                         target_faces=args.target_faces)
 
 
 def _result_line(result) -> str:
@@ -249,8 +253,8 @@ def _remesh_labels(args) -> int:
     print(f"{args.input.name}: {len(counts)} labels, meshing {len(chosen)}")
     bar, update = _progress_bar(args.input.name)
     try:
-        for label, result in iter_remesh_labels(volume, labels=chosen, method=args.method,
-                                                progress=update, **_remesh_options(args)):
+        for label, result in iter_remesh_labels(volume, options_from_args(args), labels=chosen,
+                                                progress=update):
             path = label_output_path(args.output, label)
             polygons = result.polygons() if args.quads else None
             save_mesh(result.vertices, result.faces, path, polygons=polygons)
@@ -296,19 +300,11 @@ def _cmd_batch(args) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, interrupt) if main_thread else None
     try:
-        rows = remesh_many(args.inputs, args.output, fmt=args.format, method=args.method,
-                           resolution=args.res, voxel_size=args.voxel_size,
+        rows = remesh_many(args.inputs, args.output, options_from_args(args), fmt=args.format,
                            workers=args.workers,
                            engine=args.engine or ("dask" if args.scheduler else "local"),
                            scheduler=args.scheduler, overwrite=args.overwrite,
-                           progress=not args.no_progress, checkpoint=args.checkpoint,
-                           model_index=args.model_index, threads=args.threads,
-                           device=args.device, min_component_faces=args.min_component_faces,
-                           flat_patches=args.flat_patches,
-                           normal_filter=args.normal_filter,
-                           source_bounds=args.source_bounds,
-                           decimate_error=args.decimate_error,
-                           target_faces=args.target_faces)
+                           progress=not args.no_progress)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -274,34 +274,38 @@ def label_estimate(grid: VoxelGrid, method: str, threads: int = 1) -> float:
     return estimate_seconds(key, grid.shape, grid_crossings(grid.occupancy), threads=threads)
 
 
-def iter_remesh_labels(source, *, labels=None, affine=None, method: str = "agndc",
-                       progress=None, cancel=None, crop: bool = True,
-                       **options) -> Iterator[tuple[int, object]]:
+def iter_remesh_labels(source, options=None, *, labels=None, affine=None, progress=None,
+                       cancel=None, crop: bool = True, reframe: bool = True,
+                       **changes) -> Iterator[tuple[int, object]]:
     """Remesh every label of a label map on its own: yields (label, ``RemeshResult``) in turn.
 
     Args:
         source: a LabelMap, a label map file, or an (X, Y, Z) integer array (with ``affine``).
+        options: the ``RemeshOptions`` of every label's remesh (grid methods only), with
+            ``changes`` to its fields, as for ``pipeline.remesh``.
         labels: which labels (ints or a ``parse_labels`` string); None = every label present.
-        method: as ``pipeline.remesh`` (grid methods only).
         progress: callable(fraction, message): each label gets a share of [0, 1] in proportion
             to its estimated time (``label_estimate``), its messages start with "label N: ".
         cancel: object with ``is_set()``, checked inside each remesh and between labels.
         crop: remesh each label cropped to its bounding box (the same mesh, faster: module
             docstring); False remeshes it in the whole volume.
-        options: the other options of ``pipeline.remesh``.
+        reframe: as for ``pipeline.remesh`` (False also turns ``crop`` off).
 
     Raises:
         AGNDCError for a mesh-only method or labels not present (before any remesh);
         CancelledError when cancelled.
     """
+    from .options import RemeshOptions
     from .pipeline import remesh, subrange
 
+    options = RemeshOptions.of(options, **changes)
+    method = options.method
     if method in MESH_ONLY_METHODS:
         raise AGNDCError(f"method {method!r} contours a mesh's own surface: a label map is a "
                          "voxel grid, choose a grid method")
     volume = as_label_map(source, affine)
     chosen = volume.select(labels)
-    crop = crop and options.get("reframe", True)
+    crop = crop and reframe
     weights = np.array([max(label_estimate(volume.grid(label), method), 1e-3)
                         for label in chosen])
     starts = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
@@ -311,13 +315,14 @@ def iter_remesh_labels(source, *, labels=None, affine=None, method: str = "agndc
         report = subrange(progress, lo, hi)
         if report is not None:
             report = _prefixed(report, f"label {label}: ")
-        yield label, remesh(volume.grid(label, crop=crop), method=method, progress=report,
-                            cancel=cancel, **options)
+        yield label, remesh(volume.grid(label, crop=crop), options, progress=report,
+                            cancel=cancel, reframe=reframe)
 
 
-def remesh_labels(source, *, labels=None, **options) -> dict:
-    """{label: ``RemeshResult``} of every chosen label (``iter_remesh_labels``), in its order."""
-    return dict(iter_remesh_labels(source, labels=labels, **options))
+def remesh_labels(source, options=None, **arguments) -> dict:
+    """{label: ``RemeshResult``} of every chosen label (``iter_remesh_labels``, the same
+    arguments), in its order."""
+    return dict(iter_remesh_labels(source, options, **arguments))
 
 
 def _prefixed(progress, prefix: str):

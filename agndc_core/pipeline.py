@@ -51,6 +51,7 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     MESH_ONLY_METHODS,
     METHODS,
 )
+from .options import RemeshOptions
 
 #: largest simplify tolerance (voxels) a target face count may use: beyond about a voxel the
 #: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
@@ -123,51 +124,41 @@ def subrange(progress, lo: float, hi: float):
     return lambda fraction, message: progress(lo + (hi - lo) * fraction, message)
 
 
-def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: int | None = None,
-           min_component_faces: int = 0, device: str = "cpu",
-           tile: int | None = None, progress=None, cancel=None, labels=None,
-           reframe: bool = True, flat_patches: bool = True, normal_filter: bool = True,
-           source_bounds: bool = True, decimate_error: float | None = None,
-           target_faces: int | None = None) -> RemeshResult:
+def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=None,
+           cancel=None, labels=None, reframe: bool = True, **changes) -> RemeshResult:
     """Reconstruct a triangle mesh from a binary voxel grid.
 
     Args:
         grid: the input; a plain (X, Y, Z) array is accepted and placed at unit voxel size.
-        method: one of METHODS. MESH_ONLY_METHODS need ``labels`` (use ``remesh_mesh``).
-        checkpoint: path of a .safetensors checkpoint (learned methods); default: shipped weights.
-        threads: CPU threads of the network (default: every core this process may use).
-        device: "cpu" runs the networks in the numpy runtime (no torch); "cuda" (or any
-            other torch device) in torch.
-        min_component_faces: drop connected components smaller than this.
-        tile: lattice tile size for large grids (learned methods); None = automatic.
+        options: the ``RemeshOptions`` of the run (method, network, filters, low poly; its
+            docstring has each one); ``changes`` override its fields by name, e.g.
+            ``remesh(grid, method="mc")``. The mesh-input fields (resolution, voxel_size,
+            model_index) do not apply to a grid.
         progress: callable(fraction, message); cancel: object with ``is_set()``.
-        labels: ground-truth ``ScaleLabels`` list, for MESH_ONLY_METHODS.
+        labels: ground-truth ``ScaleLabels`` list, for MESH_ONLY_METHODS (use ``remesh_mesh``).
         reframe: let the network see the shape framed as a voxelised mesh is (empty margins as
             ``voxelize`` leaves them; ``inference.trained_window``), so a grid's own empty
             margins do not change the result. ``remesh_mesh`` turns it off: its grids are
             voxelised meshes, framed exactly as the training data were.
-        flat_patches: learned methods: give each flat voxel-face patch that is not a terrace
-            one depth, the mean of the network's (``flatpatches.py``), so a flat face comes
-            out flat. False keeps the network's raw vertices.
-        normal_filter: learned methods: denoise the contoured mesh while keeping its creases
-            (bilateral filtering of the face normals, then the vertices moved to fit them,
-            ``normalfilter.py``), so the faces between creases do not come out crumpled by the
-            network's cell-to-cell noise. False keeps the contoured mesh as it is.
-        source_bounds: dual methods (``BOUNDED_METHODS``) on a grid voxelised from a mesh
-            (``grid.source_bounds``): the flat patches that bound the shape lie on the mesh's
-            bounding box (``flatpatches.snap_to_bounds``), so the result keeps the source's
-            dimensions. False uses the grid alone, as a method given only the grid must.
-        decimate_error, target_faces: low poly (``decimate.py``): merge flat regions into
-            large triangles, keeping creases, with the surface moved by at most
-            ``decimate_error`` voxels and/or down to about ``target_faces`` faces. None: the
-            full mesh.
+
+    The stages: the method's vertices (a network, surface nets, the labels' QEF vertices) or
+    marching cubes; for a network's vertices the flat patches (``flatpatches.py``: each flat
+    voxel-face patch that is not a terrace gets one depth); for dual methods on a voxelised
+    mesh the source's bounding planes; dual contouring; for a network's mesh the normal filter
+    (``normalfilter.py``: bilateral filtering of the face normals, creases kept) and the fold
+    check; low poly when asked (``decimate.py``).
     """
+    opts = RemeshOptions.of(options, **changes)
+    method, checkpoint, threads, device = opts.method, opts.checkpoint, opts.threads, opts.device
+    flat_patches, normal_filter = opts.flat_patches, opts.normal_filter
+    min_component_faces, tile = opts.min_component_faces, opts.tile
+    decimate_error, target_faces = opts.decimate_error, opts.target_faces
     if not isinstance(grid, VoxelGrid):
         grid = VoxelGrid(grid)
     if method not in METHODS:
         raise AGNDCError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     grid.check_not_trivial()
-    low_poly = decimate_error is not None or target_faces is not None
+    low_poly = opts.low_poly
     if low_poly:
         from .decimate import check_options
 
@@ -199,7 +190,7 @@ def remesh(grid: VoxelGrid, *, method: str = "agndc", checkpoint=None, threads: 
 
             vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
                                 in_place=True, pinned=pinned)
-        if source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
+        if opts.source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
             vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
                                 vertex, pinned)
         edge = crossed_edges(lattice)
@@ -302,36 +293,36 @@ def taubin_smooth(vertices_vx3: np.ndarray, faces_fx3: np.ndarray, *,
     return np.asarray(mesh.vertices, dtype=np.float64)
 
 
-def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
-                source: str = "mesh", shift=(0.0, 0.0, 0.0), **options) -> RemeshResult:
-    """Voxelise a mesh (in its own coordinates) at ``resolution`` and ``remesh`` the grid.
+def remesh_mesh(vertices, faces, options: RemeshOptions | None = None, *, source: str = "mesh",
+                shift=(0.0, 0.0, 0.0), progress=None, cancel=None, **changes) -> RemeshResult:
+    """Voxelise a mesh (in its own coordinates) at ``options.resolution`` and ``remesh`` the
+    grid (``options`` and ``changes`` as for ``remesh``).
 
     ``shift`` moves the grid by a sub-voxel offset (``voxelize``; evaluation on shifted grids).
 
     For ``MESH_ONLY_METHODS`` ("oracle", "oracle_binary", "sharp") the ground-truth labels of
     the mesh (its exact intersections and normals) are contoured instead of a network's
-    predictions. Other keyword options are passed to ``remesh``.
+    predictions.
     """
     from .voxelize import voxelize
 
-    progress = options.get("progress")
-    stages = _Stages(progress, options.get("cancel"))
-    grid = stages.run("voxelise", 0.0, voxelize, vertices, faces, resolution, shift=shift,
+    opts = RemeshOptions.of(options, **changes)
+    stages = _Stages(progress, cancel)
+    grid = stages.run("voxelise", 0.0, voxelize, vertices, faces, opts.resolution, shift=shift,
                       source=source, check=stages.check)
     # progress shares, measured at 64³-128³ (1 thread): the exact intersections take ~85 % of
     # "sharp", the network ~99 % of "agndc"; MC is over in a tenth of a second either way
-    share = 0.05
-    if method in MESH_ONLY_METHODS:
+    share, labels = 0.05, None
+    if opts.method in MESH_ONLY_METHODS:
         from .labels import make_labels
 
-        options["labels"] = stages.run("exact intersections", 0.05, make_labels, vertices, faces,
-                                       grid, levels=0, check=stages.check)
+        labels = stages.run("exact intersections", 0.05, make_labels, vertices, faces, grid,
+                            levels=0, check=stages.check)
         share = 0.8
-    options["progress"] = subrange(progress, share, 1.0)
     # a voxelised mesh is framed exactly as the training data were (voxelize + pad_to_lattice
     # leave its margins, thin unvoxelised ends included): re-framing it would only add noise
-    options.setdefault("reframe", False)
-    result = remesh(grid, method=method, **options)
+    result = remesh(grid, opts, progress=subrange(progress, share, 1.0), cancel=cancel,
+                    labels=labels, reframe=False)
     result.timings = {**stages.timings, **result.timings}
     # this function's clock started before voxelising and is still running: it already holds
     # the remesh (adding the two counted the remesh twice)
@@ -339,30 +330,32 @@ def remesh_mesh(vertices, faces, *, resolution: int = 64, method: str = "agndc",
     return result
 
 
-def remesh_file(path, *, method: str = "agndc", resolution: int = 64,
-                voxel_size: float | None = None, model_index: int = 0,
-                **options) -> RemeshResult:
+def remesh_file(path, options: RemeshOptions | None = None, *, progress=None, cancel=None,
+                **changes) -> RemeshResult:
     """Read a grid or mesh file and remesh it: the one file path behind ``agndc remesh`` and
-    ``agndc batch`` (``batch.remesh_many``).
+    ``agndc batch`` (``batch.remesh_many``); ``options`` and ``changes`` as for ``remesh``.
 
     A grid file (``gridio.GRID_EXTENSIONS``) is used as it is, in its own world units
-    (``resolution`` and ``voxel_size`` do not apply). A mesh is voxelised with ``resolution``
-    voxels along its longest side, or, when ``voxel_size`` is given, with voxels of at most that
-    many world units (``resolution_for_voxel_size``). Other keyword options go to ``remesh``.
+    (``resolution`` and ``voxel_size`` do not apply; ``model_index`` picks a .vox model). A mesh
+    is voxelised with ``resolution`` voxels along its longest side, or, when ``voxel_size`` is
+    given, with voxels of at most that many world units (``resolution_for_voxel_size``).
     """
     from .gridio import is_grid_path, load_grid, load_mesh
 
+    opts = RemeshOptions.of(options, **changes)
     path = Path(path)
     if is_grid_path(path):
-        if method in MESH_ONLY_METHODS:
-            raise AGNDCError(f"{path.name}: --method {method} needs a mesh as input (it contours "
-                             "the mesh's own surface), not a voxel grid")
-        return remesh(load_grid(path, model_index=model_index), method=method, **options)
+        if opts.method in MESH_ONLY_METHODS:
+            raise AGNDCError(f"{path.name}: --method {opts.method} needs a mesh as input (it "
+                             "contours the mesh's own surface), not a voxel grid")
+        return remesh(load_grid(path, model_index=opts.model_index), opts, progress=progress,
+                      cancel=cancel)
     vertices, faces = load_mesh(path)
-    if voxel_size is not None:
-        resolution = resolution_for_voxel_size(vertices, voxel_size, source=path.name)
-    return remesh_mesh(vertices, faces, resolution=resolution, method=method, source=path.name,
-                       **options)
+    if opts.voxel_size is not None:
+        opts = RemeshOptions.of(opts, resolution=resolution_for_voxel_size(
+            vertices, opts.voxel_size, source=path.name))
+    return remesh_mesh(vertices, faces, opts, source=path.name, progress=progress,
+                       cancel=cancel)
 
 
 def resolution_for_voxel_size(vertices_vx3: np.ndarray, voxel_size: float, *,

@@ -149,7 +149,8 @@ def test_import_dialog_shows_per_label_and_its_list_when_ticked(addon):
 
     for ticked in (False, True):
         shown = []
-        data = SimpleNamespace(method="agndc", vox_models="INDEX", per_label=ticked)
+        data = SimpleNamespace(method="agndc", vox_models="INDEX", per_label=ticked,
+                               low_poly=False, low_poly_mode="ERROR")
         operators.draw_settings(Layout(), data, mesh=False)
         start = shown.index("per_label")
         assert (shown[start + 1] == "labels") == ticked and shown.count("labels") == ticked
