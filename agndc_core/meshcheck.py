@@ -1,6 +1,6 @@
 """Is a triangle mesh a closed, consistently oriented 2-manifold? Counts of each defect.
 
-Used by the manifold property tests and by ``scripts/check_manifold.py`` (every dev mesh, every
+Used by the manifold property tests and by ``research/check_manifold.py`` (every dev mesh, every
 method); vectorised, so a 128^3 reconstruction is checked in well under a second.
 """
 

@@ -1,6 +1,6 @@
 """A small coloured voxel model (a house, as MagicaVoxel art is drawn) and the figure of its
 colours carried onto remeshed meshes (``docs/images/vox_colors_house.png``, made by
-``scripts/vox_colors_figure.py``)."""
+``research/vox_colors_figure.py``)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""scripts/headroom_bound.py's substitutions: the network's depth replaces the ground truth only
+"""research/headroom_bound.py's substitutions: the network's depth replaces the ground truth only
 along the normal of exactly axis-aligned faces (the converse, the truth there and the network
 elsewhere), and its error scale interpolates between the two."""
 
@@ -14,7 +14,7 @@ from agndc_core.tolerances import tol
 from agndc_core.voxelize import voxelize
 from conftest import box, rotation
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "headroom_bound.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "research" / "headroom_bound.py"
 
 
 def _script():

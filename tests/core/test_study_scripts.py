@@ -1,4 +1,4 @@
-"""The resumable study scripts' shared steps (scripts/study_runs.sh), with a stand-in for the
+"""The resumable study scripts' shared steps (research/study_runs.sh), with a stand-in for the
 agndc command that records how it was called."""
 
 import subprocess
@@ -25,7 +25,7 @@ def _score(tmp_path, *calls: str) -> list[str]:
     fake.write_text(FAKE_AGNDC)
     fake.chmod(0o755)
     script = "\n".join([f"set -euo pipefail; cd {REPO}", f"runs={runs}; dev=DEV; common=()",
-                        "source scripts/study_runs.sh", f"agndc={fake}", *calls])
+                        "source research/study_runs.sh", f"agndc={fake}", *calls])
     subprocess.run(["bash", "-c", script], check=True, env={"CALLS": str(tmp_path / "calls"),
                                                             "PATH": "/usr/bin:/bin"})
     calls_file = tmp_path / "calls"
@@ -52,7 +52,7 @@ def _table_script():
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("learning_curve_table",
-                                                  REPO / "scripts" / "learning_curve_table.py")
+                                                  REPO / "research" / "learning_curve_table.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One command (<= 10 minutes) on a GPU machine, for a training run that outlives the command:
 #
-#   bash scripts/gpu_chunk.sh RUN SECONDS [extra `agndc train` options...]
+#   bash research/gpu_chunk.sh RUN SECONDS [extra `agndc train` options...]
 #
 # The first call on a machine installs the wheels sent with it (.whl/), generates the procedural
 # data with all 16 cores (seeded: every machine makes the same samples; AGNDC_SAMPLES, default
@@ -20,7 +20,7 @@
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
 # kernels, not by the GPU, docs/experiments/step-times.md):
 #
-#   bash scripts/gpu_chunk.sh @STUDY SECONDS [common `agndc train` options...]
+#   bash research/gpu_chunk.sh @STUDY SECONDS [common `agndc train` options...]
 #
 # STUDY is a file of lines "RUN [its own train options]" (# comments). Every run trains on the
 # same data with the common options and then its own (the last of a repeated option wins),

@@ -1,7 +1,7 @@
 """Render docs/images/labelmaps_three_labels.png: a generated 3-label volume read as one mask
 (one mesh) and meshed per label (``agndc_core.labelmaps``, one colour per label).
 
-    .venv/bin/python scripts/label_figure.py [--out docs/images/labelmaps_three_labels.png]
+    .venv/bin/python research/label_figure.py [--out docs/images/labelmaps_three_labels.png]
 
 The volume (48 x 44 x 40 voxels of 1 x 1 x 1.5 units): a slab (label 3) with a ball (1) resting
 on it and a ring (7) standing on it, each touching the slab, as neighbouring structures of a

@@ -1,11 +1,11 @@
 """AGNDC's sharp mode against Blender's own Remesh modifier (Voxel and Sharp octree modes).
 
-    .venv-bpy/bin/python scripts/compare_voxel_remesh.py measure --res 64 [--kinds cad,organic]
-    .venv-bpy/bin/python scripts/compare_voxel_remesh.py timing --res 64 128 256 \
+    .venv-bpy/bin/python research/compare_voxel_remesh.py measure --res 64 [--kinds cad,organic]
+    .venv-bpy/bin/python research/compare_voxel_remesh.py timing --res 64 128 256 \
         --meshes fandisk,bunny --repeat 3
-    .venv-bpy/bin/python scripts/compare_voxel_remesh.py meshes --res 64   # fandisk, bevelled cube
-    .venv/bin/python scripts/compare_voxel_remesh.py render --res 64     # matplotlib (core venv)
-    .venv/bin/python scripts/compare_voxel_remesh.py tables              # markdown for the doc
+    .venv-bpy/bin/python research/compare_voxel_remesh.py meshes --res 64   # fandisk, bevelled cube
+    .venv/bin/python research/compare_voxel_remesh.py render --res 64     # matplotlib (core venv)
+    .venv/bin/python research/compare_voxel_remesh.py tables              # markdown for the doc
 
 Every method sees the **same voxel size** ``h = longest bounding-box side / (res - 2)``: that is
 ``agndc_core.voxelize.voxelize``'s convention (``resolution`` voxels along the longest side, one

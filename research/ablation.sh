@@ -8,12 +8,12 @@
 # one). Then the same recipe and steps: C steps of scale 1 where the variant has one (without CRPM
 # scale 1 lost its CRPM too), then S of the finest scale. Each is scored on the dev meshes at 64^3
 # as remeshed (normal filter on) and as contoured (`--no-normal-filter`, the network's own vertices;
-# runs "<variant>_unfiltered"); the table is scripts/learning_curve_table.py RUNS
+# runs "<variant>_unfiltered"); the table is research/learning_curve_table.py RUNS
 # (rows "<variant> @ S").
 # What this measures: how fast each variant's trained features relearn the vertices, at equal
 # steps; not what retraining each variant from scratch would reach (a GPU's work).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues.
-#   bash scripts/ablation.sh DATA [RUNS]      e.g. DATA=runs/data (agndc train-data -n 900)
+#   bash research/ablation.sh DATA [RUNS]      e.g. DATA=runs/data (agndc train-data -n 900)
 # Optional: AGNDC_ABLATION_STEPS=S,C (default 250,100); AGNDC_CURVE_MINUTES caps each train call.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -25,7 +25,7 @@ init=agndc_core/weights/agndc.safetensors
 common=(--data "$data" --init "$init" --init-matching --batch 4 --lr 5e-4 --seed 21
         --quadric-floor 1.0 --ema 0.98 --outside-crops --threads 2 --val-steps "$finest")
 if [[ -n "${AGNDC_CURVE_MINUTES:-}" ]]; then common+=(--max-minutes "$AGNDC_CURVE_MINUTES"); fi
-source scripts/study_runs.sh
+source research/study_runs.sh
 # the shipped model's architecture, with the surface nets prior (default)
 shipped='"width": 16, "snake_kernel": 5, "band_radius": 4'
 
@@ -37,4 +37,4 @@ train plus_gdfem --model "{$shipped, \"levels\": 0}" --steps "$finest" || exit 0
 both_scores plus_gdfem agndc
 train plus_dffm --model "{$shipped, \"use_crpm\": false}" --steps "$finest,$coarse,0" || exit 0
 both_scores plus_dffm agndc
-.venv/bin/python scripts/learning_curve_table.py "$runs"
+.venv/bin/python research/learning_curve_table.py "$runs"

@@ -1,8 +1,8 @@
 """Time "Remesh with AGNDC" against Blender's own Voxel Remesh on a generated CAD part.
 
-    .venv-bpy/bin/python scripts/bench_blender.py [--res 64 128] [--methods mc agndc]
+    .venv-bpy/bin/python benchmarks/bench_blender.py [--res 64 128] [--methods mc agndc]
         [--seed 7] [--repeat 3] [--install-zip dist/agndc_remesher-0.1.0-linux_x64.zip]
-    blender -b --factory-startup --python-exit-code 1 -P scripts/bench_blender.py -- ...
+    blender -b --factory-startup --python-exit-code 1 -P benchmarks/bench_blender.py -- ...
 
 For each resolution and method it runs the operator (wall time of ``bpy.ops.object.agndc_remesh``,
 including the Chamfer distance in its report) and ``remesh_object`` without the distance
@@ -24,7 +24,8 @@ os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="agndc_b
 
 import bpy  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # a script: agndc_batch beside it
+# the Blender batch script (scripts/agndc_batch.py) finds the installed extension
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
 from agndc_batch import find_addon  # noqa: E402
 
 

@@ -1,7 +1,7 @@
 """How far a network is from the grid's symmetries (``agndc_core.study.symmetry``), beside surface
 nets.
 
-    .venv/bin/python scripts/symmetry_error.py [--checkpoint PATH ...] [--mesh FILE] [--res 64]
+    .venv/bin/python research/symmetry_error.py [--checkpoint PATH ...] [--mesh FILE] [--res 64]
 
 Voxelises ``--mesh`` (default: a 1 x 0.8 x 0.6 box, whose right vertices on the faces are the
 surface nets ones) at ``--res`` and prints, for surface nets and each checkpoint (default: the

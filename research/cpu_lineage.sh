@@ -3,7 +3,7 @@
 # binary-targets-curriculum.md) trained on one thread at the lowest priority, resumable at any
 # moment. Run it again to go on where it stopped (each stage resumes bit-exactly from its state
 # shards; a finished stage is skipped):
-#   nohup nice -n 19 bash scripts/cpu_lineage.sh [DATA] [RUNS] > lineage.log 2>&1 &
+#   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] > lineage.log 2>&1 &
 # Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100, +100);
 # stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets. Pause it for a
 # benchmark with kill -STOP / kill -CONT on the `agndc train` process.

@@ -2,7 +2,7 @@
 AGNDC meshes with each face coloured by the nearest voxel (agndc_core/study/voxel_art.py), and
 write the house as a .vox beside it when asked (``--vox PATH``).
 
-    .venv/bin/python scripts/vox_colors_figure.py [-o docs/images/vox_colors_house.png]
+    .venv/bin/python research/vox_colors_figure.py [-o docs/images/vox_colors_house.png]
 """
 
 import argparse

@@ -8,7 +8,7 @@
 # Every point is scored as remeshed and as contoured (runs "<name>_unfiltered"; the points
 # quoted in docs/experiments/learning-curve.md are the contoured ones).
 # Resumable: a finished run or evaluation is skipped, a stopped run continues (--resume).
-#   bash scripts/learning_curve.sh DATA [RUNS]      e.g. DATA=runs/data (agndc train-data -n 900)
+#   bash research/learning_curve.sh DATA [RUNS]      e.g. DATA=runs/data (agndc train-data -n 900)
 # Optional: AGNDC_CURVE_MINUTES caps each training call (it stops cleanly; run again to go on).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,7 +18,7 @@ dev=${AGNDC_DEV:-../shared/data/dev}
 common=(--data "$data" --batch 4 --lr 1e-3 --seed 5 --quadric-floor 1.0 --outside-crops --threads 2)
 if [[ -n "${AGNDC_CURVE_MINUTES:-}" ]]; then common+=(--max-minutes "$AGNDC_CURVE_MINUTES"); fi
 
-source scripts/study_runs.sh
+source research/study_runs.sh
 
 undc_steps=(--steps 1000 --val-steps 10,30,100,300,1000)
 agndc_steps=(--steps 300,100,100 --val-steps 10,30,100,300)
@@ -63,4 +63,4 @@ both_scores dt_agndc16_cont agndc
 train dt_undc16_cont --undc --model '{"width": 16}' --steps 2400 "${continued[@]}" \
     "${undc_from[@]}" || exit 0
 both_scores dt_undc16_cont undc
-.venv/bin/python scripts/learning_curve_table.py "$runs"
+.venv/bin/python research/learning_curve_table.py "$runs"

@@ -1,9 +1,9 @@
 """Low poly (``agndc_core/decimate.py``) against Blender's Decimate modifier and Voxel Remesh
 with adaptivity, at the same face counts.
 
-    .venv-bpy/bin/python scripts/compare_low_poly.py measure --res 64 [--meshes a,b]
-    .venv/bin/python scripts/compare_low_poly.py render --mesh fandisk --res 64   # matplotlib
-    .venv/bin/python scripts/compare_low_poly.py tables --res 64                  # markdown
+    .venv-bpy/bin/python research/compare_low_poly.py measure --res 64 [--meshes a,b]
+    .venv/bin/python research/compare_low_poly.py render --mesh fandisk --res 64   # matplotlib
+    .venv/bin/python research/compare_low_poly.py tables --res 64                  # markdown
 
 Per CAD dev mesh (``../shared/data/dev/MANIFEST.csv``, kind ``cad``), voxelised at ``--res``:
 
@@ -34,7 +34,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # a script: the checkout's agndc_core, installed or not
-sys.path.insert(0, str(ROOT / "scripts"))
+sys.path.insert(0, str(ROOT / "research"))  # compare_voxel_remesh beside it
 
 OUT = ROOT / "out" / "low_poly"
 SHARES = (25, 10)

@@ -1,6 +1,6 @@
-"""The learning-curve table of ``scripts/learning_curve.sh``: dev-mesh means per run and step.
+"""The learning-curve table of ``research/learning_curve.sh``: dev-mesh means per run and step.
 
-    python scripts/learning_curve_table.py RUNS [--reference docs/results_rows/rows.csv]
+    python research/learning_curve_table.py RUNS [--reference docs/results_rows/rows.csv]
 
 Reads RUNS/eval_<run>_step-NNNNNN/rows.csv (64^3, grid alone) and prints one markdown row per
 (run, step) beside the reference methods of the same resolution from the reference rows

@@ -1,4 +1,4 @@
-# Shared by the resumable studies (scripts/learning_curve.sh, scripts/ablation.sh); source it after
+# Shared by the resumable studies (research/learning_curve.sh, research/ablation.sh); source it after
 # setting: runs (folder of the runs), common (train arguments of every run), dev (mesh folder).
 # A finished run or evaluation is skipped, a stopped run continues (--resume).
 agndc=.venv/bin/agndc

@@ -4,7 +4,7 @@ Rows: a generated CAD part (``study.shapes.cad_part(19)``) and a sphere; columns
 ``remesh`` returns, then the same surface as quads (blue) and the triangles that stay (orange).
 Prints the quad share of each row.
 
-    python scripts/quads_figure.py [--res 32] [--method agndc] [--out docs/images/quads.png]
+    python research/quads_figure.py [--res 32] [--method agndc] [--out docs/images/quads.png]
 """
 
 from __future__ import annotations

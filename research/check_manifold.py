@@ -1,6 +1,6 @@
 """Check every method's output on real data: closed, outward, 2-manifold (counts per method).
 
-    .venv/bin/python scripts/check_manifold.py ../shared/data/dev --res 64 128 \
+    .venv/bin/python research/check_manifold.py ../shared/data/dev --res 64 128 \
         [--methods mc,mc_taubin,surfacenets,undc,agndc,agndc+bounds,oracle]
         [--checkpoint agndc=PATH]
 

@@ -1,7 +1,7 @@
 """Signed distance of a method's output vertices to the true surface, along the true normal.
 
-    python scripts/signed_offsets.py MESH RES METHOD_OR_CHECKPOINT [...]
-    python scripts/signed_offsets.py --samples FOLDER METHOD_OR_CHECKPOINT [...]
+    python research/signed_offsets.py MESH RES METHOD_OR_CHECKPOINT [...]
+    python research/signed_offsets.py --samples FOLDER METHOD_OR_CHECKPOINT [...]
 
 The first form voxelises MESH at RES; the second takes held-out training samples
 (``agndc train-data``: their lattices, frames and true meshes). Each method (``surfacenets``,

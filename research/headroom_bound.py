@@ -1,7 +1,7 @@
 """How low can a binary-input method's CD go? The ground truth substituted into a network's
 vertices, one class of cells at a time.
 
-    python scripts/headroom_bound.py [DEV_FOLDER] [--res 64] [--shifts 0] [--checkpoint PATH]
+    python research/headroom_bound.py [DEV_FOLDER] [--res 64] [--shifts 0] [--checkpoint PATH]
         [--alphas 0.75 0.5 0.25] [--limit N] [--generated N]
 
 Each mesh is voxelised as ``agndc eval`` does (the centred grid, or ``--shifts K`` grids); the
