@@ -40,6 +40,8 @@ def _draw(ax, meshes, colours, frame):
     """Flat-shaded triangles of several (vertices, faces) meshes, one colour each."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
+    from agndc_core.study.report import frame_axes
+
     light = np.array([0.4, -0.6, 0.7]) / np.linalg.norm([0.4, -0.6, 0.7])
     triangles, colors = [], []
     for (vertices, faces), colour in zip(meshes, colours):
@@ -52,13 +54,7 @@ def _draw(ax, meshes, colours, frame):
     ax.add_collection3d(Poly3DCollection(np.concatenate(triangles),
                                          facecolors=np.concatenate(colors),
                                          edgecolors="none"))
-    lo, hi = frame
-    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.4
-    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
-        setter(c - half, c + half)
-    ax.set_box_aspect((1, 1, 1))
-    ax.view_init(elev=22, azim=-65)
-    ax.set_axis_off()
+    frame_axes(ax, *frame, zoom=0.4, elev=22, azim=-65)
 
 
 def main(argv=None) -> int:

@@ -34,18 +34,14 @@ def draw(ax, vertices, polygons, colours, frame) -> None:
     """Flat-shaded polygons (a list of (k, 3) corner arrays) with their edges."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
+    from agndc_core.study.report import frame_axes
+
     normals = np.array([np.cross(p[1] - p[0], p[-1] - p[0]) for p in polygons])
     normals /= np.linalg.norm(normals, axis=1, keepdims=True) + 1e-12
     shade = 0.35 + 0.65 * np.abs(normals @ LIGHT)
     ax.add_collection3d(Poly3DCollection(polygons, facecolors=shade[:, None] * colours,
                                          edgecolors=(0.1, 0.1, 0.2, 0.6), linewidths=0.25))
-    lo, hi = frame.min(0), frame.max(0)
-    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42
-    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
-        setter(c - half, c + half)
-    ax.set_box_aspect((1, 1, 1))
-    ax.view_init(elev=25, azim=-60)
-    ax.set_axis_off()
+    frame_axes(ax, frame.min(0), frame.max(0))
 
 
 def save_small_png(fig, path: Path, colours: int = 256) -> None:

@@ -431,13 +431,17 @@ def _draw(ax, vertices, faces, reference):
     width = float(np.clip(12.0 / np.sqrt(max(len(faces), 1)), 0.04, 0.6))
     ax.add_collection3d(Poly3DCollection(tri, facecolors=colors, edgecolors=(0.1, 0.1, 0.2, 0.4),
                                          linewidths=width))
-    lo, hi = reference.min(0), reference.max(0)
-    # < 1/2: the bounding box corners stay empty
-    centre, half = (lo + hi) / 2, (hi - lo).max() * 0.42
+    frame_axes(ax, reference.min(0), reference.max(0))
+
+
+def frame_axes(ax, lo, hi, *, zoom: float = 0.42, elev: float = 25, azim: float = -60) -> None:
+    """A 3-D axes framed on the box ``lo``..``hi`` (equal scales, no axes drawn); a ``zoom``
+    under 1/2 of the box's longest side leaves the box's corners empty."""
+    centre, half = (np.asarray(lo) + hi) / 2, (np.asarray(hi) - lo).max() * zoom
     for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre):
         setter(c - half, c + half)
     ax.set_box_aspect((1, 1, 1))
-    ax.view_init(elev=25, azim=-60)
+    ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
 
 

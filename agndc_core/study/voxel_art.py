@@ -1,6 +1,7 @@
-"""A small coloured voxel model (a house, as MagicaVoxel art is drawn) and the figure of its
-colours carried onto remeshed meshes (``docs/images/vox_colors_house.png``, made by
-``research/vox_colors_figure.py``)."""
+"""Small voxel models for the tests and figures: a coloured house (as MagicaVoxel art is drawn)
+with the figure of its colours carried onto remeshed meshes (``docs/images/vox_colors_house.png``,
+made by ``research/vox_colors_figure.py``), and a three-label volume (a segmentation's label
+map)."""
 
 from __future__ import annotations
 
@@ -115,3 +116,15 @@ def _frame(ax, shape, title):
     ax.view_init(elev=22, azim=-62)
     ax.set_axis_off()
     ax.set_title(title, fontsize=10)
+
+
+def three_labels(shape=(40, 48, 36)) -> np.ndarray:
+    """(X, Y, Z) int16 label map: a ball (1), a box (3) and a ring (7) apart, one voxel of -2
+    (a negative value, background like 0)."""
+    x, y, z = np.indices(shape, dtype=np.float64)
+    values = np.zeros(shape, dtype=np.int16)
+    values[(x - 12) ** 2 + (y - 14) ** 2 + (z - 12) ** 2 <= 8 ** 2] = 1
+    values[24:34, 8:20, 6:30] = 3
+    values[(np.hypot(x - 20, y - 34) - 8) ** 2 + (z - 20) ** 2 <= 3.2 ** 2] = 7
+    values[0, 0, 0] = -2
+    return values

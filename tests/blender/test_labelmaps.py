@@ -8,6 +8,7 @@ import pytest
 
 from agndc_core.labelmaps import LabelMap, remesh_labels
 from agndc_core.meshcheck import topology_violations
+from agndc_core.study.voxel_art import three_labels
 
 pytestmark = pytest.mark.blender
 
@@ -18,14 +19,6 @@ AFFINE = np.array([[0.9, 0.0, 0.0, -20.0],
                    [0.0, 0.0, 0.0, 1.0]])
 
 
-def three_labels(shape=(30, 36, 28)) -> np.ndarray:
-    """(X, Y, Z) int16: a ball (1), a box (3) and a ring (7), apart."""
-    x, y, z = np.indices(shape, dtype=np.float64)
-    values = np.zeros(shape, dtype=np.int16)
-    values[(x - 9) ** 2 + (y - 10) ** 2 + (z - 9) ** 2 <= 6 ** 2] = 1
-    values[18:26, 5:14, 4:22] = 3
-    values[(np.hypot(x - 15, y - 26) - 6) ** 2 + (z - 15) ** 2 <= 2.5 ** 2] = 7
-    return values
 
 
 def _save(tmp_path, kind: str):

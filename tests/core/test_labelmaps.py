@@ -21,6 +21,7 @@ from agndc_core.labelmaps import (
 )
 from agndc_core.meshcheck import topology_violations
 from agndc_core.pipeline import remesh
+from agndc_core.study.voxel_art import three_labels
 
 #: anisotropic voxels, a shear and an origin: world placement is not the identity
 AFFINE = np.array([[0.9, 0.0, 0.0, -20.0],
@@ -29,15 +30,6 @@ AFFINE = np.array([[0.9, 0.0, 0.0, -20.0],
                    [0.0, 0.0, 0.0, 1.0]])
 
 
-def three_labels(shape=(40, 48, 36)) -> np.ndarray:
-    """(X, Y, Z) int16: a ball (1), a box (3) and a ring (7) apart, one voxel of -2 (ignored)."""
-    x, y, z = np.indices(shape, dtype=np.float64)
-    values = np.zeros(shape, dtype=np.int16)
-    values[(x - 12) ** 2 + (y - 14) ** 2 + (z - 12) ** 2 <= 8 ** 2] = 1
-    values[24:34, 8:20, 6:30] = 3
-    values[(np.hypot(x - 20, y - 34) - 8) ** 2 + (z - 20) ** 2 <= 3.2 ** 2] = 7
-    values[0, 0, 0] = -2
-    return values
 
 
 @pytest.fixture
