@@ -275,6 +275,13 @@ def snap_to_bounds_naive(lattice: np.ndarray, vertex: np.ndarray, bounds) -> np.
 
 def _patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
     """Yield each patch (a list of cells) of one axis and kind that is not a terrace."""
+    for patch, terrace in _all_patches_naive(lattice, axis, lower_inside):
+        if not terrace:
+            yield patch
+
+
+def _all_patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
+    """Yield (patch, whether it is a terrace) for each patch of one axis and kind."""
     cells = [n - 1 for n in lattice.shape]
 
     def is_split(cell):
@@ -304,8 +311,7 @@ def _patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
                 if other not in seen and is_split(other):
                     seen.add(other)
                     todo.append(other)
-        if not _is_terrace_naive(patch, axis, in_plane, is_split):
-            yield patch
+        yield patch, _is_terrace_naive(patch, axis, in_plane, is_split)
 
 
 def _is_terrace_naive(patch, axis, in_plane, is_split) -> bool:
@@ -322,3 +328,172 @@ def _is_terrace_naive(patch, axis, in_plane, is_split) -> bool:
                 if is_split(tuple(other)):
                     return True
     return False
+
+
+def fit_terraced_planes(lattice: np.ndarray, vertex: np.ndarray, *, in_place: bool = False,
+                        pinned: np.ndarray | None = None) -> np.ndarray:
+    """Put the terraces of every slightly tilted plane on one plane, fitted to the network's
+    vertices.
+
+    A plane tilted a few degrees off an axis reaches a binary grid as terraces: flat patches
+    (``pure_splits``) a few tens of cells wide, one layer apart. The network cannot see the
+    plane across a terrace's width, so its vertices follow the steps (a 2° face came out with
+    0.23 voxel RMS about its own plane, as wavy as surface nets). The terrace patches that
+    reach each other across layers (``tol.terrace_reach``, as ``terrace_patches`` links them)
+    form a **terraced surface**; its cells' coordinates along the split axis are fitted by one
+    plane (least squares on the network's vertices), and the surface counts as a plane when
+    that plane crosses every one of its cells within the cell's layer (``tol.terrace_slack``)
+    and the vertices lie within ``tol.terrace_residual`` voxels RMS of it: a curved surface
+    steps through its layers unevenly and is left to the network. The cells of a plane then
+    take the plane's coordinate at their own position.
+
+    Args and returns as ``flatten_patches`` (``pinned`` set where a coordinate is written).
+    """
+    lattice = np.asarray(lattice, dtype=bool)
+    out = vertex if in_place else np.array(vertex, copy=True)
+    for axis in range(3):
+        points = np.moveaxis(lattice, axis, -1)  # split axis last
+        # views of the cells' offsets, split axis last: along it, then the two in-plane axes
+        offsets = [np.moveaxis(out[..., a], axis, -1)[:-1, :-1, :-1]
+                   for a in (axis, *(b for b in range(3) if b != axis))]
+        pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        for lower_inside in KINDS:
+            _fit_planes_of_kind(points, offsets, lower_inside, pin)
+    return out
+
+
+def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
+    """``fit_terraced_planes`` of one split axis (last) and kind, in place on ``offsets``
+    ((coordinate along the axis, the two in-plane ones), each a (A, B, L) view)."""
+    split = _pure_splits_last(points, lower_inside)
+    patches, count = ndimage.label(split, _IN_PLANE)
+    if count < 2:
+        return
+    terrace = terrace_patches(split, patches, count)
+    cells = np.nonzero(split & terrace[patches])
+    if len(cells[0]) == 0:
+        return
+    patch_of = patches[cells]
+    surface = _terraced_surfaces(patches, terrace, cells, count)[patch_of]  # (S,) surface id
+    n_surfaces = int(surface.max()) + 1
+    along, u_off, v_off = (o[cells] for o in offsets)
+    h = cells[2] + along  # (S,) coordinate along the axis, lattice units
+    u, v = cells[0] + u_off, cells[1] + v_off
+    plane = _fit_planes(u, v, h, surface, n_surfaces)  # (K, 3): h = p u + q v + r
+    fitted = plane[surface, 0] * u + plane[surface, 1] * v + plane[surface, 2]
+    local = fitted - cells[2]  # the plane's coordinate inside each cell's layer
+    outside = (local < -tol.terrace_slack) | (local > 1 + tol.terrace_slack)
+    residual = np.bincount(surface, (h - fitted) ** 2, n_surfaces)
+    size = np.bincount(surface, minlength=n_surfaces)
+    spans = _layer_spans(cells[2], surface, n_surfaces)
+    is_plane = (np.bincount(surface, outside, n_surfaces) == 0) & (spans >= 2) \
+        & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1))
+    keep = is_plane[surface]
+    index = tuple(c[keep] for c in cells)
+    offsets[0][index] = np.clip(local[keep], 0.0, 1.0)
+    if pin is not None:
+        pin[index] = True
+
+
+def _terraced_surfaces(patches, terrace, cells, count: int) -> np.ndarray:
+    """(count + 1,) int: the connected terraced surface of each patch (index 0: none). Two
+    terrace patches join when a cell of one lies within ``tol.terrace_reach`` cells (in the
+    plane, 4-connected steps) of a cell of the other one layer up."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    reach = tol.terrace_reach
+    shape = np.array(patches.shape)
+    links = [np.zeros(0, dtype=np.int64)] * 2
+    for du in range(-reach, reach + 1):
+        for dv in range(-(reach - abs(du)), reach - abs(du) + 1):
+            other = np.stack([cells[0] + du, cells[1] + dv, cells[2] + 1])
+            inside = np.all((other >= 0) & (other < shape[:, None]), axis=0)
+            a = patches[tuple(c[inside] for c in cells)]
+            b = patches[tuple(other[:, inside])]
+            hit = (b > 0) & terrace[b]
+            links = [np.concatenate([links[0], a[hit]]), np.concatenate([links[1], b[hit]])]
+    graph = coo_matrix((np.ones(len(links[0])), (links[0], links[1])),
+                       shape=(count + 1, count + 1))
+    return connected_components(graph, directed=False)[1]
+
+
+def _fit_planes(u, v, h, group, n_groups: int) -> np.ndarray:
+    """(n_groups, 3) least-squares planes h = p u + q v + r of each group's points (a group of
+    fewer than 3 points, or of collinear ones, gets its points' mean height, p = q = 0)."""
+    def total(weights):
+        return np.bincount(group, weights, n_groups)
+
+    ones = np.ones_like(u)
+    # normal equations, centred on each group's mean point so they stay well conditioned
+    n = np.maximum(total(ones), 1)
+    mu, mv, mh = total(u) / n, total(v) / n, total(h) / n
+    cu, cv, ch = u - mu[group], v - mv[group], h - mh[group]
+    a = np.stack([np.stack([total(cu * cu), total(cu * cv)], -1),
+                  np.stack([total(cu * cv), total(cv * cv)], -1)], -2)  # (K, 2, 2)
+    b = np.stack([total(cu * ch), total(cv * ch)], -1)  # (K, 2)
+    det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] ** 2
+    solvable = det > 1e-9 * np.maximum(a[:, 0, 0] * a[:, 1, 1], 1e-12)
+    slope = np.zeros((n_groups, 2))
+    safe = np.where(solvable, det, 1.0)
+    slope[:, 0] = np.where(solvable, (a[:, 1, 1] * b[:, 0] - a[:, 0, 1] * b[:, 1]) / safe, 0.0)
+    slope[:, 1] = np.where(solvable, (a[:, 0, 0] * b[:, 1] - a[:, 0, 1] * b[:, 0]) / safe, 0.0)
+    return np.stack([slope[:, 0], slope[:, 1], mh - slope[:, 0] * mu - slope[:, 1] * mv], -1)
+
+
+def _layer_spans(layer, group, n_groups: int) -> np.ndarray:
+    """(n_groups,) int: how many layers each group's cells cover (max - min + 1; 0 if empty)."""
+    lo = np.full(n_groups, np.iinfo(np.int64).max)
+    hi = np.full(n_groups, -1)
+    np.minimum.at(lo, group, layer)
+    np.maximum.at(hi, group, layer)
+    return np.where(hi >= 0, hi - lo + 1, 0)
+
+
+def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:
+    """Cell-by-cell reference of ``fit_terraced_planes`` (slow): flood-filled patches joined by
+    a union-find, one small least-squares system per terraced surface."""
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.array(vertex, dtype=np.float64, copy=True)
+    reach = tol.terrace_reach
+    for axis, lower_inside in itertools.product(range(3), KINDS):
+        in_plane = [a for a in range(3) if a != axis]
+        terraces = [patch for patch, terrace in _all_patches_naive(lattice, axis, lower_inside)
+                    if terrace]
+        owner = {cell: i for i, patch in enumerate(terraces) for cell in patch}
+        parent = list(range(len(terraces)))
+
+        def root(i, parent=parent):
+            while parent[i] != i:
+                i = parent[i]
+            return i
+
+        for cell, i in owner.items():
+            for du, dv in itertools.product(range(-reach, reach + 1), repeat=2):
+                other = list(cell)
+                other[in_plane[0]] += du
+                other[in_plane[1]] += dv
+                other[axis] += 1
+                if abs(du) + abs(dv) <= reach and tuple(other) in owner:
+                    parent[root(i)] = root(owner[tuple(other)])
+        surfaces = {}
+        for cell, i in owner.items():
+            surfaces.setdefault(root(i), []).append(cell)
+        for cells in surfaces.values():
+            u = np.array([c[in_plane[0]] + out[c][in_plane[0]] for c in cells])
+            v = np.array([c[in_plane[1]] + out[c][in_plane[1]] for c in cells])
+            h = np.array([c[axis] + out[c][axis] for c in cells])
+            layer = np.array([c[axis] for c in cells])
+            cu, cv, ch = u - u.mean(), v - v.mean(), h - h.mean()
+            a = np.array([[cu @ cu, cu @ cv], [cu @ cv, cv @ cv]])
+            det = np.linalg.det(a)
+            slope = (np.linalg.solve(a, [cu @ ch, cv @ ch])
+                     if det > 1e-9 * max(a[0, 0] * a[1, 1], 1e-12) else np.zeros(2))
+            fitted = h.mean() + slope[0] * cu + slope[1] * cv
+            local = fitted - layer
+            if (layer.max() - layer.min() + 1 >= 2
+                    and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
+                    and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2):
+                for cell, value in zip(cells, np.clip(local, 0.0, 1.0)):
+                    out[cell][axis] = value
+    return out

@@ -57,6 +57,8 @@ from .options import RemeshOptions
 #: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
 TARGET_TOLERANCE = 1.0
 
+#: fit the terraces of slightly tilted planes with one plane each (flatpatches.py)
+TERRACED_PLANES = True
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10
@@ -186,10 +188,13 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
         filtered = normal_filter and method in CHECKPOINT_NAMES  # a network's mesh
         pinned = np.zeros(vertex.shape, dtype=bool) if filtered else None
         if method in CHECKPOINT_NAMES and flat_patches:  # a network's vertices
-            from .flatpatches import flatten_patches
+            from .flatpatches import fit_terraced_planes, flatten_patches
 
             vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
                                 in_place=True, pinned=pinned)
+            if TERRACED_PLANES:
+                vertex = stages.run("terraced planes", 0.9, fit_terraced_planes, lattice,
+                                    vertex, in_place=True, pinned=pinned)
         if opts.source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
             vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
                                 vertex, pinned)

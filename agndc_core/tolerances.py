@@ -24,6 +24,15 @@ class Tolerances:
     # the plane. Measured on the dev meshes at 64³ (agndc CD): 1 misses terraces (4.115, worse
     # than not flattening, 4.048); 2, 3 and 5 give 4.032-4.033; 3 keeps the best edges (ECD)
     terrace_reach: int = 3
+    # a terraced surface is a plane (flatpatches.fit_terraced_planes) when its fitted plane
+    # crosses every one of its cells within the cell's layer, give or take this many voxels...
+    # (chosen on 24 generated validation shapes at 64³: 0.1 rejected most tilted faces of a box
+    # for one cell at 0.107; 0.15 CD 5.978 / ECD 22.2 against 6.001 / 23.1 without the fit;
+    # 0.25 the same CD, ECD 23.0; docs/experiments/terraced-planes.md)
+    terrace_slack: float = 0.15
+    # ... and the network's vertices lie within this many voxels RMS of it (a staircase followed
+    # step by step has ~0.29)
+    terrace_residual: float = 0.35
     # quad output (quads.py): two triangles of a dual-contouring quad are joined when each far
     # vertex lies within this many voxels of the other triangle's plane
     quad_planar: float = 0.05
