@@ -26,9 +26,9 @@ class Tolerances:
     terrace_reach: int = 3
     # a terraced surface is a plane (flatpatches.fit_terraced_planes) when its fitted plane
     # crosses every one of its cells within the cell's layer, give or take this many voxels...
-    # (chosen on 24 generated validation shapes at 64³: 0.1 rejected most tilted faces of a box
-    # for one cell at 0.107; 0.15 CD 5.978 / ECD 22.2 against 6.001 / 23.1 without the fit;
-    # 0.25 the same CD, ECD 23.0; docs/experiments/terraced-planes.md)
+    # (chosen on 24 generated validation shapes at 64³: 0.1 rejected a box's face tilted 4° for
+    # one cell at 0.107; 0.15 and 0.25 gave the same CD, 0.15 the better edges;
+    # docs/experiments/terraced-planes.md)
     terrace_slack: float = 0.15
     # ... and the network's vertices lie within this many voxels RMS of it (a staircase followed
     # step by step has ~0.29)

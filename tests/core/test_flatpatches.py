@@ -395,11 +395,14 @@ def test_a_tilted_plane_comes_out_on_one_plane_and_pinned():
     pinned = np.zeros(vertex.shape, dtype=bool)
     out = flatpatches.fit_terraced_planes(lattice, vertex, pinned=pinned)
     cells = np.argwhere(pinned[..., 2])
-    assert len(cells) > 0.8 * np.count_nonzero(pure_splits(lattice, 2, True))
+    # every terrace cell
+    assert len(cells) == np.count_nonzero(pure_splits(lattice, 2, True))
     u, v = cells[:, 0] + out[tuple(cells.T)][:, 0], cells[:, 1] + out[tuple(cells.T)][:, 1]
     h = cells[:, 2] + out[tuple(cells.T)][:, 2]
     coef, *_ = np.linalg.lstsq(np.c_[u, v, np.ones_like(u)], h, rcond=None)
-    assert np.abs(h - np.c_[u, v, np.ones_like(u)] @ coef).max() < 1e-4  # one plane
+    # one plane (float32 offsets), but where it leaves a cell's layer by up to the slack
+    deviation = np.abs(h - np.c_[u, v, np.ones_like(u)] @ coef)
+    assert np.percentile(deviation, 99) < 1e-3 and deviation.max() <= tol.terrace_slack
     # ... the true one (z = 5.3 + 0.05 x + 0.03 y, lattice points at integers), within noise
     assert np.abs(coef[:2] - [0.05, 0.03]).max() < 0.003 and abs(coef[2] - 5.3) < 0.1
     assert not pinned[..., :2].any()  # only the coordinate along the split axis is written
