@@ -44,20 +44,6 @@ def draw(ax, vertices, polygons, colours, frame) -> None:
     frame_axes(ax, frame.min(0), frame.max(0))
 
 
-def save_small_png(fig, path: Path, colours: int = 256) -> None:
-    """The figure as a palette PNG (a few shades per colour suffice): about a third the bytes."""
-    import io
-
-    from PIL import Image
-
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    buffer.seek(0)
-    image = Image.open(buffer).convert("RGB")
-    # octree keeps the few orange faces their own colours (median cut merges them into grey)
-    image.quantize(colours, method=Image.Quantize.FASTOCTREE).save(path, optimize=True)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--res", type=int, default=32)
@@ -70,6 +56,7 @@ def main() -> None:
     import matplotlib.pyplot as plt
 
     from agndc_core.pipeline import remesh_mesh
+    from agndc_core.study.report import save_small_png
 
     rows = shapes()
     fig = plt.figure(figsize=(7.0, 3.3 * len(rows)), dpi=90)

@@ -23,7 +23,7 @@ def main() -> None:
     import trimesh
 
     from agndc_core import pipeline
-    from agndc_core.study.report import _draw
+    from agndc_core.study.report import _draw, save_small_png
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--res", type=int, default=48)
@@ -32,7 +32,7 @@ def main() -> None:
     args = parser.parse_args()
     box = trimesh.creation.box((1.0, 0.8, 0.5))
     box.apply_transform(trimesh.transformations.rotation_matrix(np.radians(2.0), [1, 0.3, 0]))
-    fig = plt.figure(figsize=(8.0, 4.2), dpi=100)
+    fig = plt.figure(figsize=(8.0, 4.2), dpi=90)
     for col, (title, fit) in enumerate((("AGNDC, terraces as the network left them", False),
                                         ("AGNDC with the terraced-plane fit", True))):
         pipeline.TERRACED_PLANES = fit
@@ -42,7 +42,7 @@ def main() -> None:
         ax.view_init(elev=55, azim=-70)
         ax.set_title(title, fontsize=9)
     fig.subplots_adjust(left=0, right=1, bottom=0, top=0.92, wspace=0)
-    fig.savefig(args.out)
+    save_small_png(fig, args.out)
     print(args.out)
 
 
