@@ -345,9 +345,10 @@ def fit_terraced_planes(lattice: np.ndarray, vertex: np.ndarray, *, in_place: bo
     as ``terrace_patches`` finds terraces) form a **terraced surface**; its cells' coordinates
     along the split axis are fitted by one
     plane (least squares on the network's vertices), and the surface counts as a plane when
-    that plane crosses every one of its cells within the cell's layer (``tol.terrace_slack``)
-    and the vertices lie within ``tol.terrace_residual`` voxels RMS of it: a curved surface
-    steps through its layers unevenly and is left to the network. The cells of a plane then
+    that plane crosses every one of its cells within the cell's layer (``tol.terrace_slack``),
+    the vertices lie within ``tol.terrace_residual`` voxels RMS of it, and their best quadratic
+    surface bends away from it by at most ``tol.terrace_bend``: a curved surface steps through
+    its layers unevenly or bends, and is left to the network. The cells of a plane then
     take the plane's coordinate at their own position; the one-cell risers between its terraces
     keep the network's, and the normal filter lines them up with the pinned terraces around
     them (measured: a 2°-4° face 0.005-0.008 voxel RMS about its plane; fitting the risers too
@@ -392,8 +393,10 @@ def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
     residual = np.bincount(surface, (h - fitted) ** 2, n_surfaces)
     size = np.bincount(surface, minlength=n_surfaces)
     spans = _layer_spans(cells[2], surface, n_surfaces)
+    bend = _bends(u, v, h, fitted, surface, n_surfaces)
     is_plane = (np.bincount(surface, outside, n_surfaces) == 0) & (spans >= 2) \
-        & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1))
+        & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1)) \
+        & (bend <= tol.terrace_bend)
     keep = is_plane[surface]
     index = tuple(c[keep] for c in cells)
     offsets[0][index] = np.clip(local[keep], 0.0, 1.0)
@@ -448,6 +451,26 @@ def _fit_planes(u, v, h, group, n_groups: int) -> np.ndarray:
     return np.stack([slope[:, 0], slope[:, 1], mh - slope[:, 0] * mu - slope[:, 1] * mv], -1)
 
 
+def _bends(u, v, h, plane_h, group, n_groups: int) -> np.ndarray:
+    """(n_groups,) how far each group's best quadratic surface h = q(u, v) departs from its
+    best plane (``plane_h`` at its points): the RMS of q - plane over the group's points, in
+    voxels. A tilted plane's terraces give a few hundredths (the network's steps average out);
+    a gently curved surface stepping through the same layers bends by its sagitta."""
+    def total(weights):
+        return np.bincount(group, weights, n_groups)
+
+    n = np.maximum(total(np.ones_like(u)), 1)
+    cu, cv = u - (total(u) / n)[group], v - (total(v) / n)[group]
+    scale = np.sqrt(total(cu * cu + cv * cv) / n) + 1e-9  # (K,) the group's extent
+    cu, cv = cu / scale[group], cv / scale[group]
+    features = np.stack([cu * cu, cu * cv, cv * cv, cu, cv, np.ones_like(cu)])  # (6, S)
+    normal = np.stack([np.stack([total(a * b) for b in features], -1) for a in features], -2)
+    rhs = np.stack([total(a * h) for a in features], -1)  # (K, 6)
+    coefficients = np.einsum("kij,kj->ki", np.linalg.pinv(normal, rcond=1e-10), rhs)
+    quadratic_h = np.sum(coefficients[group] * features.T, axis=1)  # (S,)
+    return np.sqrt(total((quadratic_h - plane_h) ** 2) / n)
+
+
 def _layer_spans(layer, group, n_groups: int) -> np.ndarray:
     """(n_groups,) int: how many layers each group's cells cover (max - min + 1; 0 if empty)."""
     lo = np.full(n_groups, np.iinfo(np.int64).max)
@@ -498,9 +521,16 @@ def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.nda
                      if det > 1e-9 * max(a[0, 0] * a[1, 1], 1e-12) else np.zeros(2))
             fitted = h.mean() + slope[0] * cu + slope[1] * cv
             local = fitted - layer
+            # the best quadratic surface, on coordinates scaled by the surface's extent
+            scale = np.sqrt(np.mean(cu * cu + cv * cv)) + 1e-9
+            su, sv = cu / scale, cv / scale
+            design = np.stack([su * su, su * sv, sv * sv, su, sv, np.ones_like(su)], -1)
+            quadratic = design @ (np.linalg.pinv(design.T @ design, rcond=1e-10)
+                                  @ (design.T @ h))
             if (layer.max() - layer.min() + 1 >= 2
                     and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
-                    and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2):
+                    and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2
+                    and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend):
                 for cell, value in zip(cells, np.clip(local, 0.0, 1.0)):
                     out[cell][axis] = value
     return out

@@ -33,6 +33,10 @@ class Tolerances:
     # ... and the network's vertices lie within this many voxels RMS of it (a staircase followed
     # step by step has ~0.29)
     terrace_residual: float = 0.35
+    # ... and its best quadratic surface departs from the plane by at most this many voxels RMS
+    # (a gently curved surface through the same layers is not flattened; a tilted face with
+    # only 2-3 terraces bends its quadratic fit by up to 0.25 following the steps)
+    terrace_bend: float = 0.3
     # quad output (quads.py): two triangles of a dual-contouring quad are joined when each far
     # vertex lies within this many voxels of the other triangle's plane
     quad_planar: float = 0.05

@@ -429,3 +429,21 @@ def test_a_tilted_box_face_remeshed_is_flat():
     coef, *_ = np.linalg.lstsq(design, local[top, 2], rcond=None)
     waviness = np.std(local[top, 2] - design @ coef) / h
     assert waviness < 0.05
+
+
+def test_bends_measure_how_far_a_quadratic_fit_leaves_the_plane():
+    """A plane's points bend by nothing; a paraboloid's by the RMS of its quadratic part about
+    its best plane (least squares per group, computed directly)."""
+    rng = np.random.default_rng(2)
+    u, v = rng.uniform(0, 30, (2, 400))
+    group = np.repeat([0, 1], 200)
+    h = 5 + 0.05 * u - 0.02 * v + np.where(group == 1, 0.006 * (u - 15) ** 2, 0.0)
+    plane = flatpatches._fit_planes(u, v, h, group, 2)
+    fitted = plane[group, 0] * u + plane[group, 1] * v + plane[group, 2]
+    bends = flatpatches._bends(u, v, h, fitted, group, 2)
+    assert bends[0] < 1e-9
+    mine = group == 1
+    design = np.c_[u[mine], v[mine], np.ones(mine.sum())]
+    best, *_ = np.linalg.lstsq(design, h[mine], rcond=None)
+    expected = np.sqrt(np.mean((h[mine] - design @ best) ** 2))  # the surface is exactly quadratic
+    assert bends[1] == pytest.approx(expected, rel=1e-6) and expected > 0.3
