@@ -387,7 +387,7 @@ def _cmd_demo(args) -> int:
     if args.source_bounds:
         print("surfacenets, undc and agndc also used the part's bounding box, as `agndc remesh` "
               "does for a mesh (--no-source-bounds: the grid alone, as marching cubes)")
-    missing = [m for m in ("agndc", "undc") if m not in methods]
+    missing = [m.name for m in REGISTRY if m.weights and m.name not in methods]
     if missing:
         print(f"note: no shipped weights for {', '.join(missing)}; train with `agndc train`")
     return 0

@@ -17,7 +17,8 @@ from agndc_core.voxelize import voxelize
 
 #: the issue's bound on the runtimes' disagreement, in voxels (measured: ~1e-5)
 PARITY_VOXELS = 1e-4
-SHIPPED = ["agndc", "undc"]
+#: the shipped checkpoints (weights/<name>.safetensors): the distilled and the full AGNDC, UNDC
+SHIPPED = ["agndc_student", "agndc", "undc"]
 
 
 def cad_lattice(size: int, seed: int) -> np.ndarray:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from agndc_core.checkpoint import count_parameters, default_checkpoint_path, load_checkpoint
+from agndc_core.methods import CHECKPOINT_NAMES
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.study.shapes import generate_shape
@@ -25,13 +26,14 @@ WEIGHTS_BUDGET_BYTES = 25 * 1024 * 1024
 
 
 def _shipped(name):
-    path = default_checkpoint_path(name)
+    """The shipped weights of a learned method."""
+    path = default_checkpoint_path(CHECKPOINT_NAMES[name])
     if not path.is_file():
         pytest.fail(f"shipped weights missing: {path}")
     return path
 
 
-@pytest.mark.parametrize("name", ["agndc", "undc"])
+@pytest.mark.parametrize("name", list(CHECKPOINT_NAMES))
 def test_shipped_checkpoint_describes_itself(name):
     path = _shipped(name)
     sidecar = json.loads(path.with_suffix(".json").read_text())
@@ -50,7 +52,7 @@ def test_shipped_weights_fit_the_budget():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("method", ["agndc", "undc"])
+@pytest.mark.parametrize("method", list(CHECKPOINT_NAMES))
 def test_shipped_weights_beat_marching_cubes_and_surface_nets(method):
     _shipped(method)
     cd = {method: [], "mc": [], "surfacenets": []}
