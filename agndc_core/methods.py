@@ -33,7 +33,7 @@ class Method:
 
 REGISTRY = (
     Method("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring, distilled "
-           "for speed: about twice as fast as agndc_full on the CPU, as close to the surface "
+           "for speed: about 1.5x as fast as agndc_full on the CPU, as close to the surface "
            "(shipped weights)", weights="agndc_student", bounded=True, in_blender=True),
     Method("agndc_full", "AGNDC Full", "The full AGNDC cascade (attention, snake "
            "convolutions) that agndc was distilled from (shipped weights)",
