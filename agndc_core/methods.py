@@ -32,12 +32,12 @@ class Method:
 
 
 REGISTRY = (
-    Method("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring, distilled "
-           "for speed: about 1.5x as fast as agndc_full on the CPU, as close to the surface "
-           "(shipped weights)", weights="agndc_student", bounded=True, in_blender=True),
-    Method("agndc_full", "AGNDC Full", "The full AGNDC cascade (attention, snake "
-           "convolutions) that agndc was distilled from (shipped weights)",
-           title="AGNDC (full cascade)", weights="agndc", bounded=True, in_blender=True),
+    Method("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring (shipped "
+           "weights)", weights="agndc", bounded=True, in_blender=True),
+    Method("agndc_fast", "AGNDC Fast", "AGNDC distilled for speed (no snake convolutions or "
+           "attention): 1.5x as fast, as close to the surface, weaker on some creases (shipped "
+           "weights)", title="AGNDC fast (distilled)", weights="agndc_student", bounded=True,
+           in_blender=True),
     Method("undc", "UNDC", "Single-scale neural dual contouring baseline (shipped weights)",
            weights="undc", bounded=True, in_blender=True),
     Method("surfacenets", "Surface Nets", "Each dual vertex at the mean of its cell's "

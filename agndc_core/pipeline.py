@@ -3,9 +3,9 @@
     grid (VoxelGrid) --pad--> lattice --method--> (vertex offsets, edges) --dual_contour--> mesh
 
 Methods:
-    "agndc"  the AGNDC cascade distilled for speed (no snake convolutions or attention, taught
-             by the full cascade), with the shipped (or a given) checkpoint;
-    "agndc_full" the full AGNDC cascade it was distilled from;
+    "agndc"  the AGNDC cascade with the shipped (or a given) checkpoint;
+    "agndc_fast" the AGNDC cascade distilled for speed (no snake convolutions or attention,
+             taught by agndc's own vertices; 1.5x as fast);
     "undc"   the single-scale plain-convolution baseline checkpoint (paper Table 4, first row);
     "surfacenets" surface nets (surfacenets.py): each dual vertex at the mean of its cell's
              crossed-edge midpoints, contoured like the networks' vertices; no weights;

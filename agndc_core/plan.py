@@ -38,10 +38,10 @@ MARGIN = 1
 #: "about", not "exactly". "distance" is the Chamfer distance of one output to its source (30k
 #: samples), per output.
 CALIBRATION = {
-    "agndc_full": (29.5, 3.05, 0.162),
-    # the distilled cascade: agndc_full's per-edge and per-point terms times 0.47, the ratio of
-    # their remesh times on the dev meshes (0.40 at 64³, 0.49 at 128³; `agndc eval`, 1 thread)
-    "agndc": (13.9, 1.43, 0.162),
+    "agndc": (29.5, 3.05, 0.162),
+    # the distilled cascade: agndc's per-edge and per-point terms times 0.47, the ratio of their
+    # remesh times on the dev meshes (0.40 at 64³, 0.49 at 128³; `agndc eval`, 1 thread)
+    "agndc_fast": (13.9, 1.43, 0.162),
     "undc": (14.3, 0.807, 0.00785),
     "mc": (1.17, 0.0, 0.00207),
     "sharp": (7.23, 0.023, 0.067),
@@ -50,7 +50,7 @@ CALIBRATION = {
 #: share of a learned run that does not get faster with more network threads (Amdahl): the same
 #: runs on 2 threads took 1/1.18..1/1.39 of their 1-thread time (agndc, mean 1.29: 0.55 serial)
 #: and 1/0.96..1/1.23 (undc, mean 1.16: 0.72 serial)
-SERIAL_SHARE = {"agndc": 0.55, "agndc_full": 0.55, "undc": 0.72}
+SERIAL_SHARE = {"agndc": 0.55, "agndc_fast": 0.55, "undc": 0.72}
 #: the Blender operator asks before a run estimated longer than this (seconds)
 CONFIRM_SECONDS = 10.0
 

@@ -35,7 +35,7 @@ from .evaluate import (
     write_report,
 )
 
-REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "agndc_full",
+REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "agndc_fast",
                   "oracle_binary", "oracle", "surfacenets+bounds", "undc+bounds", "agndc+bounds")
 CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
 #: shapes of the picture: file stems of the evaluated folder, or ``ROTATED_BOX`` (built here)
