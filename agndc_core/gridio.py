@@ -33,13 +33,14 @@ import gzip
 import io
 import math
 import os
+import warnings
 import zipfile
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
-from .errors import AGNDCError, GridFileError
+from .errors import AGNDCError, GridError, GridFileError
 from .formats.binvox import guard_size, read_binvox, write_binvox
 from .formats.vox import count_vox_models, read_vox_colors, write_vox
 from .grid import MAX_VOXELS, VoxelGrid
@@ -318,7 +319,6 @@ def _read_npz(path: Path) -> VoxelGrid:
 
 def _binary_grid(values: np.ndarray, affine: np.ndarray, name: str) -> VoxelGrid:
     """The grid of an .npy / .npz array; a label map is refused with what to do instead."""
-    from .labelmaps import refuse_label_map
 
     if isinstance(values, np.ndarray) and values.ndim == 3:
         refuse_label_map(values, name)
@@ -411,7 +411,6 @@ def _npz_occupancy_key(shapes: dict, name: str) -> str:
 
 
 def _read_nifti(path: Path) -> VoxelGrid:
-    from .labelmaps import warn_if_merged
 
     data, affine = _nifti_values(path)
     grid = VoxelGrid(_label_occupancy(data), affine, source=path.name)
@@ -567,3 +566,61 @@ def _describe(exc: BaseException) -> str:
     message = exc.args[0] if len(exc.args) > 1 and isinstance(exc.args[0], str) else str(exc)
     text = (getattr(exc, "strerror", None) or message).strip()
     return (text.splitlines()[0] if text else "") or type(exc).__name__
+
+
+# --- label maps read as one mask -------------------------------------------------------------
+
+
+class MergedLabelsWarning(UserWarning):
+    """A label map was read as one mask, so its labels are merged into one solid.
+
+    Attributes:
+        source: the file name; labels: (L,) int64 the positive labels that were merged.
+    """
+
+    def __init__(self, source: str, labels: np.ndarray):
+        self.source, self.labels = source, np.asarray(labels, dtype=np.int64)
+        super().__init__(f"{source} holds {len(self.labels)} labels "
+                         f"({shown_values(self.labels)}): read as one mask, they are merged into "
+                         "one solid")
+
+
+def warn_if_merged(values: np.ndarray, source: str) -> None:
+    """Warn (``MergedLabelsWarning``) when ``values``, about to be read as the mask
+    ``values > 0``, hold two or more positive labels."""
+    labels = merged_labels(values)
+    if labels is not None:
+        warnings.warn(MergedLabelsWarning(source, labels),
+                      stacklevel=4)  # the caller of load_grid
+
+
+def refuse_label_map(values: np.ndarray, source: str) -> None:
+    """Raise GridError for ``values`` holding two or more positive labels where a binary grid
+    is read (.npy, .npz), with what to do instead; other values are left to the grid check."""
+    labels = merged_labels(values)
+    if labels is not None:
+        raise GridError(f"{source}: a label map ({len(labels)} labels: "
+                        f"{shown_values(labels)}), not a binary grid: mesh each label on its own "
+                        "(agndc remesh --per-label; Blender: Per Label), or threshold it into "
+                        "one mask")
+
+
+def merged_labels(values: np.ndarray) -> np.ndarray | None:
+    """(L,) int64 the positive labels of (X, Y, Z) ``values`` when there are two or more (the
+    volume is a label map, not a mask), else None. Only integers and whole-number floats are
+    labels."""
+    if values.dtype.kind not in "iuf":
+        return None
+    positive = values[values > 0]
+    if positive.size == 0 or positive.min() == positive.max():  # one label: a plain mask
+        return None
+    if values.dtype.kind == "f" and not np.all(positive == np.round(positive)):
+        return None
+    return np.unique(positive).astype(np.int64)
+
+
+def shown_values(values, limit: int = 12) -> str:
+    """'1, 3, 7' (at most ``limit`` values, then '... (N in all)')."""
+    values = [int(v) for v in values]
+    text = ", ".join(map(str, values[:limit]))
+    return text + (f", ... ({len(values)} in all)" if len(values) > limit else "")

@@ -24,7 +24,6 @@ point. ``remesh(reframe=False)`` shows the network the grid as given, so no crop
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +32,10 @@ import numpy as np
 
 from .errors import AGNDCError, CancelledError, GridError
 from .grid import MAX_VOXELS, VoxelGrid
+from .gridio import (  # noqa: F401  (MergedLabelsWarning: part of this module's API)
+    MergedLabelsWarning,
+    shown_values,
+)
 from .methods import MESH_ONLY_METHODS
 
 #: empty voxels kept around a label's bounding box when it is cropped (any margin gives the same
@@ -43,53 +46,6 @@ LABEL_TAG = "_label-"
 #: labels above this have their bounding boxes found one label at a time, not in one pass
 #: (``scipy.ndimage.find_objects`` lists a slot for every value up to the largest)
 _ONE_PASS_MAX_LABEL = 1 << 20
-
-
-class MergedLabelsWarning(UserWarning):
-    """A label map was read as one mask, so its labels are merged into one solid.
-
-    Attributes:
-        source: the file name; labels: (L,) int64 the positive labels that were merged.
-    """
-
-    def __init__(self, source: str, labels: np.ndarray):
-        self.source, self.labels = source, np.asarray(labels, dtype=np.int64)
-        super().__init__(f"{source} holds {len(self.labels)} labels "
-                         f"({_shown(self.labels)}): read as one mask, they are merged into "
-                         "one solid")
-
-
-def warn_if_merged(values: np.ndarray, source: str) -> None:
-    """Warn (``MergedLabelsWarning``) when ``values``, about to be read as the mask
-    ``values > 0``, hold two or more positive labels."""
-    labels = merged_labels(values)
-    if labels is not None:
-        warnings.warn(MergedLabelsWarning(source, labels),
-                      stacklevel=4)  # the caller of load_grid
-
-
-def refuse_label_map(values: np.ndarray, source: str) -> None:
-    """Raise GridError for ``values`` holding two or more positive labels where a binary grid
-    is read (.npy, .npz), with what to do instead; other values are left to the grid check."""
-    labels = merged_labels(values)
-    if labels is not None:
-        raise GridError(f"{source}: a label map ({len(labels)} labels: {_shown(labels)}), not a "
-                        "binary grid: mesh each label on its own (agndc remesh --per-label; "
-                        "Blender: Per Label), or threshold it into one mask")
-
-
-def merged_labels(values: np.ndarray) -> np.ndarray | None:
-    """(L,) int64 the positive labels of (X, Y, Z) ``values`` when there are two or more (the
-    volume is a label map, not a mask), else None. Only integers and whole-number floats are
-    labels."""
-    if values.dtype.kind not in "iuf":
-        return None
-    positive = values[values > 0]
-    if positive.size == 0 or positive.min() == positive.max():  # one label: a plain mask
-        return None
-    if values.dtype.kind == "f" and not np.all(positive == np.round(positive)):
-        return None
-    return np.unique(positive).astype(np.int64)
 
 
 @dataclass
@@ -144,8 +100,8 @@ class LabelMap:
         wanted = list(dict.fromkeys(int(label) for label in wanted))
         missing = [label for label in wanted if label not in present]
         if missing:
-            raise AGNDCError(f"{self.source}: no label {_shown(missing)}; the labels present "
-                             f"are {_shown(list(present))}")
+            raise AGNDCError(f"{self.source}: no label {shown_values(missing)}; the labels present "
+                             f"are {shown_values(list(present))}")
         return wanted
 
     def grid(self, label: int, *, crop: bool = True, margin: int = CROP_MARGIN) -> VoxelGrid:
@@ -327,10 +283,3 @@ def remesh_labels(source, options=None, **arguments) -> dict:
 
 def _prefixed(progress, prefix: str):
     return lambda fraction, message: progress(fraction, prefix + message)
-
-
-def _shown(values, limit: int = 12) -> str:
-    """'1, 3, 7' (at most ``limit`` values, then '... (N in all)')."""
-    values = [int(v) for v in values]
-    text = ", ".join(map(str, values[:limit]))
-    return text + (f", ... ({len(values)} in all)" if len(values) > limit else "")
