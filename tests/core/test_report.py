@@ -121,7 +121,11 @@ def test_report_on_a_small_folder(tmp_path):
     assert "| CD×10⁵ ↓ by shift | shift 0 | shift 1 | std of the shift means |" in shifted
     with open(out.parent / "results_rows" / "shifted" / "rows.csv") as handle:
         shifted_rows = list(csv.DictReader(handle))
-    assert len(shifted_rows) == 2 * 2 * 7 and {r["shift"] for r in shifted_rows} == {"0", "1"}
+    # 2 meshes x 2 shifts x the 8 grid-alone methods
+    grid_alone = [m for m in REPORT_METHODS if "+bounds" not in m]
+    assert len(grid_alone) == 8
+    assert len(shifted_rows) == 2 * 2 * len(grid_alone)
+    assert {r["shift"] for r in shifted_rows} == {"0", "1"}
 
 
 def test_eval_uses_the_checkpoint_it_is_given(tmp_path, capsys):
