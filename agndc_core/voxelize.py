@@ -56,8 +56,10 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
     # centre the grid on the bounding box; voxel i's centre is at origin + i * voxel
     origin = (lo + hi) / 2 - (counts - 1) * voxel / 2 + np.asarray(shift, dtype=np.float64) * voxel
     points_frame = (vertices - origin) / voxel
-    occupancy = inside_points(points_frame[faces], tuple(counts), rule=_choose_rule(faces, rule),
-                              check=check)
+    # checks between the mesh checks, the winding-rule test and the ray casting: each a pass
+    # over every face of a dense mesh
+    rule = _choose_rule(faces, rule, check)
+    occupancy = inside_points(points_frame[faces], tuple(counts), rule=rule, check=check)
     return VoxelGrid.from_spacing(occupancy, voxel, origin, source=source,
                                   source_bounds=np.stack([lo, hi]))
 
@@ -126,20 +128,25 @@ def inside_points(triangles_fx3x3: np.ndarray, dims: tuple[int, int, int], *,
     triangles = np.asarray(triangles_fx3x3, dtype=np.float64) - jitter
     votes = np.zeros(dims, dtype=np.uint8)
     for axis in range(3):
+        if check is not None:
+            check()
         votes += _inside_along_axis(triangles, dims, axis, rule, check)
     return votes >= 2
 
 
-def _choose_rule(faces: np.ndarray, rule: str) -> str:
+def _choose_rule(faces: np.ndarray, rule: str, check=None) -> str:
     """Winding for closed consistently-oriented meshes (every directed edge exactly once), else
-    parity."""
+    parity (``check()`` between its passes)."""
     if rule not in RULES:
         raise MeshError(f"unknown point-in-mesh rule {rule!r}; choose one of {RULES}")
     if rule != "auto":
         return rule
+    tick = check if check is not None else (lambda: None)
+    tick()
     directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2).astype(np.int64)
     n = int(faces.max()) + 1
     keys = np.sort(directed[:, 0] * n + directed[:, 1])
+    tick()
     if np.any(keys[1:] == keys[:-1]):
         return "parity"  # an edge used twice in the same direction: inconsistent orientation
     reverse_keys = np.sort(directed[:, 1] * n + directed[:, 0])
