@@ -427,7 +427,7 @@ def _check_arguments(options: RemeshOptions, fmt, workers, engine, scheduler) ->
         raise AGNDCError(f"workers must be at least 1, got {workers}")
     if options.voxel_size is not None and not options.voxel_size > 0:
         raise AGNDCError(f"voxel size must be positive, got {options.voxel_size}")
-    if options.decimate_error is not None or options.target_faces is not None:
+    if options.low_poly:
         from .decimate import check_options
 
         check_options(options.decimate_error, options.target_faces)

@@ -10,7 +10,7 @@ cancellation, ground-truth labels -- stays a separate argument.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 
 from .errors import AGNDCError
 
@@ -67,9 +67,6 @@ class RemeshOptions:
             raise AGNDCError(f"unknown remesh option(s) {', '.join(unknown)}; the options are "
                              f"{', '.join(sorted(FIELD_NAMES))}")
         return replace(options if options is not None else cls(), **changes)
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
     @property
     def low_poly(self) -> bool:

@@ -14,22 +14,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def bevelled_cube():
-    """A unit cube with its 12 edges bevelled at 45° (the Low Poly acceptance shape)."""
-    import trimesh
-    from scipy.spatial import ConvexHull
-
-    b = 0.12
-    corners = []
-    for sx, sy, sz in np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T:
-        for dx, dy, dz in ((b, 0, 0), (0, b, 0), (0, 0, b)):
-            corners.append([sx * (0.5 - dx), sy * (0.5 - dy), sz * (0.5 - dz)])
-    hull = ConvexHull(np.array(corners))
-    mesh = trimesh.Trimesh(hull.points, hull.simplices)
-    mesh.fix_normals()
-    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
-
-
 def main() -> None:
     import matplotlib
 
@@ -38,7 +22,7 @@ def main() -> None:
 
     from agndc_core.pipeline import remesh_mesh
     from agndc_core.study.report import _draw, save_small_png
-    from agndc_core.study.shapes import cad_part
+    from agndc_core.study.shapes import bevelled_cube, cad_part
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--out", type=Path,

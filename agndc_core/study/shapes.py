@@ -116,6 +116,21 @@ def cad_part(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return generate_shape(seed)
 
 
+def bevelled_cube(size: float = 1.0, bevel: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """A cube with its four vertical edges bevelled (45° chamfers): its top and bottom rims
+    are 90° creases, the edges EF1 counts (Low Poly's acceptance shape, the students' crease
+    check). (V, 3) float64 vertices, (F, 3) int64 faces, outward."""
+    import trimesh
+
+    half = size / 2
+    corners = [[sx * (half - bevel), sy * half, z] for sx in (-1, 1) for sy in (-1, 1)
+               for z in (-half, half)]
+    corners += [[sx * half, sy * (half - bevel), z] for sx in (-1, 1) for sy in (-1, 1)
+                for z in (-half, half)]
+    mesh = trimesh.convex.convex_hull(np.array(corners))
+    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
 # ---------------------------------------------------------------- 2-D helpers
 
 

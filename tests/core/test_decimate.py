@@ -11,19 +11,8 @@ from agndc_core.decimate import decimate, signed_volume
 from agndc_core.errors import AGNDCError
 from agndc_core.meshcheck import topology_violations
 from agndc_core.pipeline import remesh_mesh
+from agndc_core.study.shapes import bevelled_cube
 from conftest import box, cylinder_with_hole
-
-
-def bevelled_cube(size: float = 1.0, bevel: float = 0.2):
-    """A cube with its four vertical edges bevelled (45° chamfers): its top and bottom rims
-    are 90° creases, the edges EF1 counts."""
-    half = size / 2
-    corners = [[sx * (half - bevel), sy * half, z] for sx in (-1, 1) for sy in (-1, 1)
-               for z in (-half, half)]
-    corners += [[sx * half, sy * (half - bevel), z] for sx in (-1, 1) for sy in (-1, 1)
-                for z in (-half, half)]
-    mesh = trimesh.convex.convex_hull(np.array(corners))
-    return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
 def assert_closed_outward(vertices, faces):
