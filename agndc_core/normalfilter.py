@@ -77,12 +77,17 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
     """Unit normals (F, 3), areas (F,) and centroids (F, 3) of the faces (a zero-area face
     gets a zero normal, so it neither pulls on its neighbours nor moves its vertices)."""
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]  # (F, 3)
     cross = _face_cross(vertices, faces)  # (F, 3)
     length = np.sqrt(_dot(cross, cross))
     normals = np.divide(cross, length[:, None], out=np.zeros_like(cross),
                         where=length[:, None] > 0)
-    return normals, 0.5 * length, (a + b + c) / 3.0
+    return normals, 0.5 * length, face_centroids(vertices, faces)
+
+
+def face_centroids(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) centroids of the faces."""
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]  # (F, 3)
+    return (a + b + c) / 3.0
 
 
 def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -200,7 +205,7 @@ def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
     for _ in range(iterations):
         if check is not None:
             check()
-        centroids = face_geometry(vertices, faces)[2]  # (F, 3)
+        centroids = face_centroids(vertices, faces)  # (F, 3)
         pull = incidence @ (normals * _dot(normals, centroids)[:, None])  # (V, 3)
         step = pull - np.einsum("vij,vj->vi", outer, vertices)  # (V, 3)
         vertices = keep_orientation(vertices, vertices + step / degree, faces, original)
