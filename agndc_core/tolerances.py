@@ -37,6 +37,9 @@ class Tolerances:
     # (a gently curved surface through the same layers is not flattened; a tilted face with
     # only 2-3 terraces bends its quadratic fit by up to 0.25 following the steps)
     terrace_bend: float = 0.3
+    # passes of alternating projections that move a terraced surface's least-squares plane
+    # into its cells' layers (flatpatches._into_layers)
+    terrace_projections: int = 100
     # quad output (quads.py): two triangles of a dual-contouring quad are joined when each far
     # vertex lies within this many voxels of the other triangle's plane
     quad_planar: float = 0.05

@@ -14,6 +14,7 @@ from agndc_core.flatpatches import (
     snap_to_bounds,
     snap_to_bounds_naive,
 )
+from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
 from agndc_core.tolerances import tol
@@ -406,6 +407,42 @@ def test_a_tilted_plane_comes_out_on_one_plane_and_pinned():
     # ... the true one (z = 5.3 + 0.05 x + 0.03 y, lattice points at integers), within noise
     assert np.abs(coef[:2] - [0.05, 0.03]).max() < 0.003 and abs(coef[2] - 5.3) < 0.1
     assert not pinned[..., :2].any()  # only the coordinate along the split axis is written
+
+
+def test_a_plane_tilted_one_degree_is_fitted_inside_its_layers(monkeypatch):
+    """Two or three terraces tens of cells wide whose vertices follow the steps (each at its
+    layer's middle, as a network that cannot see the plane leaves them): their least-squares
+    plane leaves the terraces' far ends by more than the slack, and only the projections into
+    the layers find the plane that crosses every cell."""
+    lattice = tilted_lattice((120, 40, 8), (0.017, 0.004), 3.9)  # ~1° off z, narrow end terraces
+    rng = np.random.default_rng(5)
+    vertex = np.clip(surface_nets_lattice(lattice) + rng.normal(0, 0.03, lattice.shape + (3,)),
+                     0.0, 1.0).astype(np.float32)
+    vertex[..., 2] = 0.5 + rng.normal(0, 0.03, lattice.shape)  # the staircase
+    terraces = pure_splits(lattice, 2, True)
+    assert len(np.unique(np.nonzero(terraces)[2])) >= 2
+
+    def fitted_cells(projections):
+        monkeypatch.setattr(tol, "terrace_projections", projections)
+        pinned = np.zeros(vertex.shape, dtype=bool)
+        out = flatpatches.fit_terraced_planes(lattice, vertex, pinned=pinned)
+        return out, np.argwhere(pinned[..., 2])
+
+    passes = tol.terrace_projections
+    assert len(fitted_cells(0)[1]) == 0  # the least-squares plane alone is rejected
+    out, cells = fitted_cells(passes)
+    assert len(cells) == np.count_nonzero(terraces)
+    u, v = cells[:, 0] + out[tuple(cells.T)][:, 0], cells[:, 1] + out[tuple(cells.T)][:, 1]
+    h = cells[:, 2] + out[tuple(cells.T)][:, 2]
+    coef, *_ = np.linalg.lstsq(np.c_[u, v, np.ones_like(u)], h, rcond=None)
+    # one plane, clipped into the layers it leaves by at most a third of the slack
+    deviation = np.abs(h - np.c_[u, v, np.ones_like(u)] @ coef)
+    assert np.percentile(deviation, 90) < 1e-3 and deviation.max() <= tol.terrace_slack / 3
+    # ... tilted along the terraces' steps like the true one (the staircase's heights alone
+    # say nothing finer than the layers)
+    assert abs(coef[0] - 0.017) < 0.006 and abs(coef[1] - 0.004) < 0.006
+    naive = flatpatches.fit_terraced_planes_naive(lattice, vertex)
+    np.testing.assert_allclose(out, naive, atol=1e-5)
 
 
 def test_a_tilted_box_face_remeshed_is_flat():
