@@ -386,16 +386,17 @@ def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
     along, u_off, v_off = (o[cells] for o in offsets)
     h = cells[2] + along  # (S,) coordinate along the axis, lattice units
     u, v = cells[0] + u_off, cells[1] + v_off
+    spans = _layer_spans(cells[2], surface, n_surfaces)
     plane = _fit_planes(u, v, h, surface, n_surfaces)  # (K, 3): h = p u + q v + r
-    plane = _into_layers(u, v, cells[2], plane, surface, n_surfaces)
+    plane = _into_layers(u, v, cells[2], plane, surface, n_surfaces, spans)
     fitted = plane[surface, 0] * u + plane[surface, 1] * v + plane[surface, 2]
     local = fitted - cells[2]  # the plane's coordinate inside each cell's layer
     outside = (local < -tol.terrace_slack) | (local > 1 + tol.terrace_slack)
     residual = np.bincount(surface, (h - fitted) ** 2, n_surfaces)
     size = np.bincount(surface, minlength=n_surfaces)
-    spans = _layer_spans(cells[2], surface, n_surfaces)
     bend = _bends(u, v, h, fitted, surface, n_surfaces)
     is_plane = (np.bincount(surface, outside, n_surfaces) == 0) & (spans >= 2) \
+        & (size >= tol.terrace_min_cells) \
         & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1)) \
         & (bend <= tol.terrace_bend)
     keep = is_plane[surface]
@@ -452,16 +453,20 @@ def _fit_planes(u, v, h, group, n_groups: int) -> np.ndarray:
     return np.stack([slope[:, 0], slope[:, 1], mh - slope[:, 0] * mu - slope[:, 1] * mv], -1)
 
 
-def _into_layers(u, v, layer, plane, group, n_groups: int) -> np.ndarray:
-    """(n_groups, 3) the planes that leave some of their cells' layers by more than
-    ``tol.terrace_slack``, moved towards a plane that crosses every cell within its layer:
-    alternating projections (heights clipped into the layers, then a least-squares plane
-    through them), at most ``tol.terrace_projections`` passes, until every plane is within a
-    third of the slack. A plane tilted 1° reaches a 128³ grid as 2-3 terraces 40-60 cells wide:
-    the network's vertices follow those steps, and their least-squares plane leaves the
-    terraces' far ends by up to 0.3 voxel although the true plane crosses every one of them. A
-    plane that passed already, and a curved surface no plane fits (it still leaves its layers
-    after the passes), keep the first fit's plane."""
+def _into_layers(u, v, layer, plane, group, n_groups: int, spans) -> np.ndarray:
+    """(n_groups, 3) the planes, where one leaves some of its cells' layers by more than
+    ``tol.terrace_slack`` and its surface covers 3 layers or more, moved towards a plane that
+    crosses every cell within its layer: alternating projections (heights clipped into the
+    layers, then a least-squares plane through them), at most ``tol.terrace_projections``
+    passes or until the plane is within a third of the slack; kept when it ends within the
+    slack. ``spans``: (n_groups,) the layers each surface covers (``_layer_spans``).
+
+    A plane tilted 1° reaches a 128³ grid as 2-3 terraces 40-60 cells wide: the network's
+    vertices follow those steps, and their least-squares plane leaves the terraces' far ends by
+    up to 0.3 voxel although the true plane crosses every one of them. Two layers are left
+    alone: the flat plane along their shared boundary crosses both, and would flatten a step of
+    a fraction of a voxel between two flat faces. A plane that passed already, and a curved
+    surface no plane fits, keep the least-squares plane."""
     def departure(planes) -> np.ndarray:  # (n_groups,) how far each leaves its layers, voxels
         fitted = planes[group, 0] * u + planes[group, 1] * v + planes[group, 2]
         gap = np.maximum(layer - fitted, fitted - (layer + 1))
@@ -470,7 +475,8 @@ def _into_layers(u, v, layer, plane, group, n_groups: int) -> np.ndarray:
         return out
 
     first = departure(plane)
-    active = first > tol.terrace_slack  # (n_groups,) the planes still being moved
+    moving = (first > tol.terrace_slack) & (spans >= 3)
+    active = moving.copy()  # (n_groups,) the planes still being moved
     moved = plane
     for _ in range(tol.terrace_projections):
         if not active.any():
@@ -479,7 +485,7 @@ def _into_layers(u, v, layer, plane, group, n_groups: int) -> np.ndarray:
         refit = _fit_planes(u, v, np.clip(fitted, layer, layer + 1), group, n_groups)
         moved = np.where(active[:, None], refit, moved)
         active &= departure(moved) > tol.terrace_slack / 3
-    improved = (first > tol.terrace_slack) & (departure(moved) <= tol.terrace_slack)
+    improved = moving & (departure(moved) <= tol.terrace_slack)
     return np.where(improved[:, None], moved, plane)
 
 
@@ -560,7 +566,7 @@ def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.nda
             design = np.stack([su * su, su * sv, sv * sv, su, sv, np.ones_like(su)], -1)
             quadratic = design @ (np.linalg.pinv(design.T @ design, rcond=1e-10)
                                   @ (design.T @ h))
-            if (layer.max() - layer.min() + 1 >= 2
+            if (layer.max() - layer.min() + 1 >= 2 and len(cells) >= tol.terrace_min_cells
                     and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
                     and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2
                     and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend):
@@ -574,7 +580,7 @@ def _into_layers_naive(u, v, layer, fitted) -> np.ndarray:
     def departure(heights) -> float:
         return float(np.max(np.maximum(layer - heights, heights - (layer + 1))))
 
-    if departure(fitted) <= tol.terrace_slack:
+    if departure(fitted) <= tol.terrace_slack or layer.max() - layer.min() + 1 < 3:
         return fitted
     moved = fitted
     for _ in range(tol.terrace_projections):

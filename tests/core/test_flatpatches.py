@@ -14,9 +14,9 @@ from agndc_core.flatpatches import (
     snap_to_bounds,
     snap_to_bounds_naive,
 )
-from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
+from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.tolerances import tol
 
 
