@@ -396,7 +396,6 @@ def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
     size = np.bincount(surface, minlength=n_surfaces)
     bend = _bends(u, v, h, fitted, surface, n_surfaces)
     is_plane = (np.bincount(surface, outside, n_surfaces) == 0) & (spans >= 2) \
-        & (size >= tol.terrace_min_cells) \
         & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1)) \
         & (bend <= tol.terrace_bend)
     keep = is_plane[surface]
@@ -566,7 +565,7 @@ def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.nda
             design = np.stack([su * su, su * sv, sv * sv, su, sv, np.ones_like(su)], -1)
             quadratic = design @ (np.linalg.pinv(design.T @ design, rcond=1e-10)
                                   @ (design.T @ h))
-            if (layer.max() - layer.min() + 1 >= 2 and len(cells) >= tol.terrace_min_cells
+            if (layer.max() - layer.min() + 1 >= 2
                     and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
                     and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2
                     and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend):

@@ -37,9 +37,6 @@ class Tolerances:
     # (a gently curved surface through the same layers is not flattened; a tilted face with
     # only 2-3 terraces bends its quadratic fit by up to 0.25 following the steps)
     terrace_bend: float = 0.3
-    # ... and it has at least this many cells (a few cells of a curved surface's terraces
-    # fit a plane as well as a tilted face's)
-    terrace_min_cells: int = 0
     # passes of alternating projections that move a terraced surface's least-squares plane
     # into its cells' layers (flatpatches._into_layers)
     terrace_projections: int = 100
