@@ -165,7 +165,9 @@ def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarra
 
     Args:
         vertex_dx3: (Dx, Dy, Dz, 3) float offsets of each cell's vertex from its min corner
-            (clipped into [0, 1]).
+            (clipped into [0, 1]); or a function of (C,) flat cell ids giving their (C, 3)
+            offsets, for a field only the contoured cells need (e.g.
+            ``surfacenets.surface_nets_cells``: a dense 256³ field is 200 MB).
         edge_dx3: (Dx, Dy, Dz, 3) bool, edge from point p along +axis is crossed.
         inside: optional (Dx, Dy, Dz) bool point occupancy. When given, ``edge_dx3`` must be its
             crossing parity (``labels.crossed_edges(inside)``, else ContourError); the quads face
@@ -190,7 +192,7 @@ def dual_contour(vertex_dx3: np.ndarray, edge_dx3: np.ndarray, inside: np.ndarra
     points, axes = _occupied_edges(edge_dx3)
     quads = _quad_cells(points, axes)  # (E, 4, 3)
     if inside is None:
-        vertices, quad_ids = _compact_vertices(quads, vertex_dx3)
+        vertices, quad_ids = _compact_vertices(quads, vertex_dx3, edge_dx3.shape[:3])
         faces = _split_quads(quad_ids, vertices)
         quad_of_face = np.repeat(np.arange(len(quad_ids)), 2)
     else:
@@ -240,7 +242,7 @@ def _contour_patches(quads, points, axes, vertex_dx3, inside):
     local = _quad_local_edges(axes)  # (E, 4) cell edge of each quad corner
     first = np.cumsum(PATCH_COUNT[config]) - PATCH_COUNT[config]  # (C,) first vertex of a cell
     quad_ids = first[cell_ids] + PATCH[config[cell_ids], local]  # (E, 4)
-    vertices = _patch_vertices(cells, config, first, vertex_dx3)
+    vertices = _patch_vertices(cells, config, first, vertex_dx3, shape)
     tube_sides = _tube_sides(config, cell_ids, axes)  # (E, 4) bool
     extra, side_ids = _tube_vertices(tube_sides, quads, points, axes, inside, len(vertices))
     flip = _outward_flip(points, axes, inside)
@@ -286,7 +288,14 @@ def _quad_local_edges(axes: np.ndarray) -> np.ndarray:
     return 4 * axes[:, None] + np.array([3, 1, 0, 2])
 
 
-def _patch_vertices(cells, config, first, vertex_dx3) -> np.ndarray:
+def _cell_offsets(vertex_dx3, cells: np.ndarray) -> np.ndarray:
+    """(C, 3) float64 offsets of the flat cell ids from a dense field or a function of them."""
+    if callable(vertex_dx3):
+        return np.asarray(vertex_dx3(cells), dtype=np.float64)
+    return vertex_dx3.reshape(-1, 3)[cells].astype(np.float64)
+
+
+def _patch_vertices(cells, config, first, vertex_dx3, shape) -> np.ndarray:
     """(V, 3) float64 vertex of each (cell, patch): cells in C order, then patches in id order.
 
     A cell with one patch keeps ``cell + clip(offset)``; with several, each patch's vertex is its
@@ -295,10 +304,10 @@ def _patch_vertices(cells, config, first, vertex_dx3) -> np.ndarray:
     count = PATCH_COUNT[config]
     owner = np.repeat(np.arange(len(cells)), count)  # (V,) cell of each vertex
     patch = np.arange(len(owner)) - first[owner]
-    offset = vertex_dx3.reshape(-1, 3)[cells[owner]].astype(np.float64)
+    offset = _cell_offsets(vertex_dx3, cells)[owner]
     several = count[owner] > 1
     offset[several] += PATCH_SHIFT[config[owner[several]], patch[several]]
-    corner = np.stack(np.unravel_index(cells[owner], vertex_dx3.shape[:3]), axis=1)
+    corner = np.stack(np.unravel_index(cells[owner], shape), axis=1)
     return corner + np.clip(offset, 0.0, 1.0)
 
 
@@ -421,19 +430,18 @@ def _quad_cells(points: np.ndarray, axes: np.ndarray) -> np.ndarray:
     return np.stack([points - e_b - e_c, points - e_c, points, points - e_b], axis=1)
 
 
-def _compact_vertices(quads: np.ndarray, vertex_dx3: np.ndarray):
+def _compact_vertices(quads: np.ndarray, vertex_dx3, shape):
     """One vertex per used cell, numbered in C order of the cells.
 
     Returns:
         vertices: (V, 3) float64 = cell + clipped offset; quad_ids: (E, 4) int64.
     """
-    shape = vertex_dx3.shape[:3]
     if len(quads) == 0:
         return np.zeros((0, 3)), np.zeros((0, 4), dtype=np.int64)
     flat = np.ravel_multi_index(quads.reshape(-1, 3).T, shape)
     used, inverse = np.unique(flat, return_inverse=True)
     cells = np.stack(np.unravel_index(used, shape), axis=1)
-    offsets = np.clip(vertex_dx3.reshape(-1, 3)[used].astype(np.float64), 0.0, 1.0)
+    offsets = np.clip(_cell_offsets(vertex_dx3, used), 0.0, 1.0)
     return cells + offsets, inverse.reshape(-1, 4).astype(np.int64)
 
 

@@ -232,9 +232,10 @@ def unfold_components(vertices, faces, lattice, edge, min_component_faces: int =
     in the same order (only the quads' diagonals follow the positions), so the surface nets
     vertices are compared on the network's own faces."""
     from .contour import restore_folded_components
-    from .surfacenets import surface_nets_lattice
+    from .surfacenets import surface_nets_cells
 
-    reference, reference_faces = dual_contour(surface_nets_lattice(lattice), edge, lattice,
+    reference, reference_faces = dual_contour(lambda cells: surface_nets_cells(lattice, cells),
+                                              edge, lattice,
                                               min_component_faces=min_component_faces)
     if reference.shape != vertices.shape or reference_faces.shape != faces.shape:
         return vertices  # not the same surfaces (cannot happen for one lattice): leave them

@@ -51,6 +51,28 @@ def surface_nets_lattice(lattice: np.ndarray) -> np.ndarray:
     return out
 
 
+def surface_nets_cells(lattice: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """``surface_nets_lattice`` at some cells only: (C,) flat cell ids into the lattice's shape
+    (cells, not the last layer of points along any axis) -> (C, 3) float32 offsets, the same
+    sums in the same order (so the same values to the bit). A check that needs the vertices of
+    the contoured cells alone reads 8 corners per cell instead of filling a dense field (200 MB
+    and seconds at 256³)."""
+    flat = np.asarray(lattice, dtype=bool).reshape(-1)
+    cells = np.asarray(cells, dtype=np.int64)
+    strides = np.array([lattice.shape[1] * lattice.shape[2], lattice.shape[2], 1])
+    total = np.zeros((len(cells), 3), dtype=np.float32)
+    count = np.zeros(len(cells), dtype=np.float32)
+    for axis, start in CELL_EDGES:
+        low = cells + int(np.dot(start, strides))
+        part = (flat[low] != flat[low + strides[axis]]).astype(np.float32)
+        count += part
+        for a in range(3):
+            total[:, a] += np.float32(0.5 if a == axis else start[a]) * part
+    has = count > 0
+    return np.where(has[:, None], total / np.maximum(count, 1.0)[:, None],
+                    np.float32(CENTRE)).astype(np.float32)
+
+
 def surface_nets_offsets_naive(lattice: np.ndarray) -> np.ndarray:
     """Cell-by-cell reference of ``surface_nets_lattice`` for one (X, Y, Z) lattice (slow)."""
     lattice = np.asarray(lattice, dtype=bool)

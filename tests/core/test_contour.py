@@ -8,7 +8,7 @@ from agndc_core.contour import ContourError, drop_small_components, dual_contour
 from agndc_core.contour_naive import dual_contour_naive
 from agndc_core.grid import pad_to_lattice
 from agndc_core.labels import crossed_edges
-from agndc_core.surfacenets import surface_nets_lattice
+from agndc_core.surfacenets import surface_nets_cells, surface_nets_lattice
 from conftest import edge_use_counts
 
 
@@ -43,6 +43,20 @@ def test_dense_grids_with_patches_and_tubes_equal_naive():
         np.testing.assert_array_equal(fast[0], slow[0])
         tubes += len(fast[1]) - 2 * int(edge.sum())  # each tube vertex adds one triangle
     assert tubes > 0
+
+
+def test_a_field_given_as_a_function_of_the_cells_contours_the_same():
+    """The fold check contours surface nets computed at the contoured cells only."""
+    rng = np.random.default_rng(4)
+    for _ in range(10):
+        lattice = np.pad(rng.random(rng.integers(3, 9, size=3)) < rng.uniform(0.3, 0.8), 1)
+        edge = crossed_edges(lattice)
+        for inside in (lattice, None):
+            dense = dual_contour(surface_nets_lattice(lattice), edge, inside)
+            sparse = dual_contour(lambda cells, lat=lattice: surface_nets_cells(lat, cells),
+                                  edge, inside)
+            assert np.array_equal(dense[1], sparse[1])
+            np.testing.assert_array_equal(dense[0], sparse[0])
 
 
 def test_edges_must_be_the_crossing_parity_of_inside():

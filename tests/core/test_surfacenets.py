@@ -7,7 +7,11 @@ import trimesh
 
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
-from agndc_core.surfacenets import surface_nets_lattice, surface_nets_offsets_naive
+from agndc_core.surfacenets import (
+    surface_nets_cells,
+    surface_nets_lattice,
+    surface_nets_offsets_naive,
+)
 from conftest import edge_use_counts
 
 
@@ -29,6 +33,17 @@ def test_fast_equals_naive_on_random_grids():
         assert fast.shape == naive.shape == lattice.shape + (3,)
         assert fast.dtype == naive.dtype == np.float32
         np.testing.assert_array_equal(fast, naive)
+
+
+def test_surface_nets_of_some_cells_equal_the_dense_field():
+    rng = np.random.default_rng(3)
+    for lattice in random_lattices(20, seed=5):
+        cell_shape = tuple(n - 1 for n in lattice.shape)
+        cells = np.argwhere(rng.random(cell_shape) < 0.5)  # any subset, any order
+        rng.shuffle(cells)
+        flat = np.ravel_multi_index(cells.T, lattice.shape)
+        np.testing.assert_array_equal(surface_nets_cells(lattice, flat),
+                                      surface_nets_lattice(lattice)[tuple(cells.T)])
 
 
 def box_grid(block=(10, 12, 14), pad=3):
