@@ -8,6 +8,8 @@ import trimesh
 from agndc_core.grid import VoxelGrid
 from agndc_core.pipeline import remesh
 from agndc_core.surfacenets import (
+    CENTRE,
+    surface_cells,
     surface_nets_cells,
     surface_nets_lattice,
     surface_nets_offsets_naive,
@@ -44,6 +46,18 @@ def test_surface_nets_of_some_cells_equal_the_dense_field():
         flat = np.ravel_multi_index(cells.T, lattice.shape)
         np.testing.assert_array_equal(surface_nets_cells(lattice, flat),
                                       surface_nets_lattice(lattice)[tuple(cells.T)])
+
+
+def test_surface_cells_are_the_cells_off_centre():
+    for lattice in random_lattices(20, seed=6):
+        dense = surface_nets_lattice(lattice)
+        cells = np.stack(np.unravel_index(surface_cells(lattice), lattice.shape), axis=1)
+        off_centre = np.argwhere(np.any(dense != CENTRE, axis=-1))
+        # a cell with crossed edges can average back to the centre (opposite crossings), so
+        # every off-centre cell is a surface cell, and every surface cell has a crossed edge
+        assert set(map(tuple, off_centre)) <= set(map(tuple, cells))
+        assert all(len({bool(lattice[tuple(c + d)]) for d in np.ndindex(2, 2, 2)}) == 2
+                   for c in cells)
 
 
 def box_grid(block=(10, 12, 14), pad=3):
