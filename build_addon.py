@@ -93,7 +93,7 @@ PRODUCT_MODULES = (
     "labels.py", "labelmaps.py", "methods.py", "options.py",
     "surfacenets.py", "contour.py", "flatpatches.py", "normalfilter.py", "mc.py", "metrics.py",
     "quads.py",
-    "pipeline.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
+    "pipeline.py", "progress.py", "inference.py", "checkpoint.py", "tolerances.py", "batch.py",
     "batch_job.py", "batch_dask.py", "colors.py", "decimate.py", "meshcheck.py", "formats",
     "runtime", "weights",
     "nn/__init__.py", "nn/config.py", "nn/layout.py",

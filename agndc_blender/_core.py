@@ -16,7 +16,7 @@ from importlib.util import find_spec
 BASE = (f"{__package__}.agndc_core" if find_spec(f"{__package__}.agndc_core") is not None
         else "agndc_core")
 MODULES = ("checkpoint", "colors", "errors", "gridio", "labelmaps", "methods", "metrics",
-           "options", "pipeline", "plan", "voxelize")
+           "options", "pipeline", "plan", "progress", "voxelize")
 
 def __getattr__(name):
     if name == "core":

@@ -117,12 +117,17 @@ def confirm_message(jobs) -> str:
             f"{format_seconds(seconds)}. Esc cancels while it runs.")
 
 
+def status_text(label: str, fraction: float, message: str) -> str:
+    """The status bar's text during a run: 'AGNDC 42%  Part: predict'."""
+    return f"{label} {fraction:.0%}  {message}"
+
+
 def draw_status(header, context):
     """The status bar while a run is going (``WorkSpace.status_text_set`` takes a function)."""
     layout = header.layout
     row = layout.row(align=True)
     row.progress(factor=RUN.fraction, type="BAR",
-                 text=f"{RUN.label} {RUN.fraction:.0%}  {RUN.message}")
+                 text=status_text(RUN.label, RUN.fraction, RUN.message))
     layout.label(text="Cancelling..." if RUN.cancelling else "Esc: cancel", icon="CANCEL")
 
 

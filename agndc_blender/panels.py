@@ -37,7 +37,7 @@ class VIEW3D_PT_agndc_remesh(bpy.types.Panel):
         settings = context.scene.agndc
         if RUN.active:
             col = layout.column(align=True)
-            col.progress(factor=RUN.fraction, type="BAR", text=f"{RUN.fraction:.0%}")
+            col.progress(factor=RUN.fraction, type="BAR", text=f"{RUN.label} {RUN.fraction:.0%}")
             col.label(text=RUN.message)
             col.label(text="Cancelling..." if RUN.cancelling else "Esc: cancel", icon="CANCEL")
         draw_settings(layout.column(), settings, mesh=True)

@@ -39,6 +39,7 @@ from ._core import checkpoint as checkpoint_module
 from ._core import colors, errors, gridio, labelmaps, metrics, pipeline, plan, voxelize
 from ._core import methods as registry
 from ._core import options as options_module
+from ._core import progress as progress_module
 
 #: collection that receives the results placed beside their sources
 COLLECTION_NAME = "AGNDC Results"
@@ -159,6 +160,7 @@ class Job:
     parent: str | None = None
     parent_inverse: np.ndarray = field(default_factory=lambda: np.eye(4))
     estimate: float = 0.0  # seconds (plan.estimate_seconds)
+    crossings: float = 0.0  # crossed lattice edges of its grid (plan.mesh/grid_crossings)
     open_edges: int = 0
     warnings: list = field(default_factory=list)
     error: errors.AGNDCError | None = None
@@ -307,8 +309,8 @@ def mesh_job(obj, settings: Settings, depsgraph=None) -> Job:
     if job.open_edges:
         job.warnings.append(f"{name} is not closed ({job.open_edges:,} open edges): remeshed as "
                             f"the solid it encloses; {OPEN_MESH_HINT}")
-    crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
-    job.estimate = estimate_run(settings.methods(), grid.shape, crossings, settings.threads,
+    job.crossings = plan.mesh_crossings(vertices * world_per_unit, faces, grid.voxel_size)
+    job.estimate = estimate_run(settings.methods(), grid.shape, job.crossings, settings.threads,
                                 settings.distance)
     return job
 
@@ -373,9 +375,9 @@ def _estimate_grid_job(job: Job, settings: Settings) -> None:
     if job.grid is None:
         job.grid = _read_grid(job)
     job.shape = tuple(job.grid.shape)
-    crossings = plan.grid_crossings(job.grid.occupancy)
+    job.crossings = plan.grid_crossings(job.grid.occupancy)
     # no source mesh: no Chamfer distance to report
-    job.estimate = estimate_run(settings.methods(), job.shape, crossings, settings.threads,
+    job.estimate = estimate_run(settings.methods(), job.shape, job.crossings, settings.threads,
                                 distances=False)
 
 
@@ -491,51 +493,46 @@ def is_busy() -> bool:
 
 
 def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
-    def check_cancel():
-        if cancel is not None and cancel.is_set():
-            raise errors.CancelledError("Remesh cancelled")
-
     methods = settings.methods()
     options = settings.remesh_options(job.resolution)
-    main_share = 0.75 if len(methods) > 1 else 0.9
-    sub = pipeline.subrange
+    stages = progress_module.Stages(progress, cancel, _expected_stages(job, settings, options))
+    main_progress = _method_progress(stages, settings.method, settings.method)
     if job.grid_path is not None:
-        progress(0.0, "reading grid")
+        stages.report(0.0, "reading grid")
         grid = job.grid if job.grid is not None else _read_grid(job)
         job.grid = None  # the run holds it now; the job does not keep it alive
-        check_cancel()
-        first = pipeline.remesh(grid, options, progress=sub(progress, 0.0, main_share),
-                                cancel=cancel)
+        stages.check()
+        first = pipeline.remesh(grid, options, progress=main_progress, cancel=cancel)
     else:
         try:
             first = pipeline.remesh_mesh(job.vertices, job.faces, options, source=f"'{job.name}'",
-                                         progress=sub(progress, 0.0, main_share), cancel=cancel)
+                                         progress=main_progress, cancel=cancel)
         except errors.GridError as exc:
             if not job.open_edges:
                 raise
             raise _open_surface_error(job.name) from exc
     results = [first]
-    if len(methods) > 1:
-        check_cancel()
-        results.append(pipeline.remesh(first.grid, method="mc", cancel=cancel,
-                                       progress=sub(progress, main_share, 0.9)))
+    for method in methods[1:]:  # marching cubes of the same grid, to compare
+        stages.check()
+        results.append(pipeline.remesh(first.grid, method=method, cancel=cancel,
+                                       progress=_method_progress(stages, method,
+                                                                 settings.method)))
     outputs = [Output(r.method, r.vertices, r.faces, r.seconds) for r in results]
     if settings.colors and results[0].grid is not None and results[0].grid.colors is not None:
-        progress(0.9, "voxel colours")
+        stages.report(stages.reported, "voxel colours")
         for output in outputs:
             _color_output(output, results[0].grid)
     noise = None
     if settings.distance and job.vertices is not None:
-        progress(0.9, "sampling noise of the distance")
-        noise = metrics.chamfer_distance(job.vertices, job.faces, job.vertices, job.faces,
-                                         n_samples=DISTANCE_SAMPLES, seed=1, check=check_cancel)
+        noise = stages.run(NOISE_STAGE, metrics.chamfer_distance, job.vertices, job.faces,
+                           job.vertices, job.faces, n_samples=DISTANCE_SAMPLES, seed=1,
+                           check=stages.check)
     for output, result in zip(outputs, results):
-        check_cancel()
+        stages.check()
         if settings.distance and job.vertices is not None:
-            progress(0.9, f"distance of {SUFFIXES[output.method]} to the source")
-            output.cd = metrics.chamfer_distance(output.vertices, output.faces, job.vertices,
-                                                 job.faces, n_samples=DISTANCE_SAMPLES,
-                                                 check=check_cancel)
+            output.cd = stages.run(_distance_stage(output.method), metrics.chamfer_distance,
+                                   output.vertices, output.faces, job.vertices, job.faces,
+                                   n_samples=DISTANCE_SAMPLES, check=stages.check)
             output.cd_noise = noise
         if job.face_materials is not None and len(output.faces):
             centroids = output.vertices[output.faces].mean(axis=1)  # (F, 3)
@@ -544,8 +541,55 @@ def _compute(job: Job, settings: Settings, progress, cancel) -> list[Output]:
         if settings.quads:  # a quad joins two triangles of one material only
             output.polygons = result.polygons(groups=output.materials)
         output.vertices = output.vertices / job.frame  # back to the object's local coordinates
-    progress(1.0, "done")
+    stages.report(1.0, "done")
     return outputs
+
+
+#: the progress message of the Chamfer distance of the source to itself (its sampling noise)
+NOISE_STAGE = "sampling noise of the distance"
+
+
+def _distance_stage(method: str) -> str:
+    return f"distance of {SUFFIXES[method]} to the source"
+
+
+def _expected_stages(job: Job, settings: Settings, options) -> dict[str, float]:
+    """{stage: expected seconds} of one job, in the order ``_compute`` runs them (the spans of
+    its progress bar): each method's remesh (named by the method), then the distances."""
+    points = pipeline.lattice_points(job.shape)
+    size = {"crossings": job.crossings, "points": points}
+    expected = {}
+    for method in settings.methods():
+        method_options = options_module.RemeshOptions.of(options, method=method)
+        if job.vertices is not None and method == settings.method:
+            stages = pipeline.expected_mesh_stages(method_options, triangles=len(job.faces),
+                                                   **size)
+        else:
+            stages = pipeline.expected_stages(method_options, **size,
+                                              bounded=job.vertices is not None)
+        expected[method] = sum(stages.values())
+    if settings.distance and job.vertices is not None:
+        distance = plan.stage_seconds("distance", triangles=len(job.faces), **size)
+        expected[NOISE_STAGE] = distance
+        for method in settings.methods():
+            expected[_distance_stage(method)] = distance
+    return expected
+
+
+def _method_progress(stages, method: str, chosen: str):
+    """The progress callback of one method's remesh, over its span of the job's bar: the
+    comparison's messages name their method ("MC marching cubes"; the status bar names the
+    chosen one), and a remesh that ends says which ("Sharp done", not "done" mid-run)."""
+    report = stages.sub(method)
+    if report is None:
+        return None
+    label = SUFFIXES[method]
+    prefix = "" if method == chosen else f"{label} "
+
+    def forward(fraction, message):
+        report(fraction, f"{label} done" if message == "done" else prefix + message)
+
+    return forward
 
 
 def _color_output(output: Output, grid) -> None:

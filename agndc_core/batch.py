@@ -11,11 +11,16 @@ Blender object, the Blender batch script).
 * **One job** (``run_job``) is ``pipeline.remesh_file`` (the code path of ``agndc remesh``) and
   ``gridio.save_mesh``, which writes ``name.tmp-<pid>.<ext>`` and renames it into place, so an
   output file is always complete. It never raises for a bad input: the error becomes a row.
+* **Per label** (``per_label``, ``labels``). Each input is read as a label map and every chosen
+  label becomes its own output, named as ``agndc remesh --per-label`` names it
+  (``labelmaps.label_output_path``: ``OUTDIR/sub/seg_label-3.ply``), and its own row; a label
+  that fails (or is not in the file) is its own failed row, the file's other labels are still
+  written. A job is still one file, so a label map is read once, whatever its label count.
 * **Resumable.** An output at least as new as its input is skipped (a "skipped" row that keeps
-  the previous run's numbers) unless ``overwrite``. Rows are appended to ``batch.csv`` and
-  flushed as each job ends, so a kill loses nothing already done; temporary files that a killed
-  run left are removed when the next run starts. A completed run rewrites the table in input
-  order.
+  the previous run's numbers) unless ``overwrite``; per label, each label's output on its own.
+  Rows are appended to ``batch.csv`` and flushed as each job ends, so a kill loses nothing
+  already done; temporary files that a killed run left are removed when the next run starts. A
+  completed run rewrites the table in input order.
 * **Engines.** ``"local"``: with one worker the jobs run in this process; with more, in a pool
   of ``spawn``-ed processes, each loading the network once (``prepare_worker``) and giving it
   ``cores // workers`` threads. A worker that dies (out of memory, a crash in a library) fails
@@ -35,11 +40,13 @@ import time
 from collections import deque
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import replace
 from pathlib import Path
 
 from .batch_job import (  # noqa: F401  (one job: defined there, part of this module's API)
     Job,
     failed_row,
+    is_current,
     prepare_worker,
     run_job,
 )
@@ -52,14 +59,16 @@ from .gridio import (
     is_grid_path,
     is_mesh_path,
 )
+from .labelmaps import check_grid_method, parse_labels
 from .options import RemeshOptions
 from .pipeline import CHECKPOINT_NAMES, METHODS
 
 CSV_NAME = "batch.csv"
-#: columns of batch.csv: grid is the remeshed grid's shape (X x Y x Z), seconds the job's wall
-#: time, peak_rss_mb the peak resident memory of the process that ran it so far
-CSV_FIELDS = ("input", "output", "method", "grid", "faces", "vertices", "seconds", "status",
-              "error", "peak_rss_mb", "worker")
+#: columns of batch.csv: label is the label value of a per-label output (else empty), grid the
+#: remeshed grid's shape (X x Y x Z), seconds the job's (label's) wall time, peak_rss_mb the
+#: peak resident memory of the process that ran it so far
+CSV_FIELDS = ("input", "output", "label", "method", "grid", "faces", "vertices", "seconds",
+              "status", "error", "peak_rss_mb", "worker")
 OUTPUT_FORMATS = tuple(ext[1:] for ext in MESH_SAVE_EXTENSIONS)  # ply, obj, stl, glb
 MANIFEST_EXTENSIONS = (".txt", ".lst", ".csv")
 ENGINES = ("local", "dask")
@@ -181,11 +190,10 @@ def _unique(jobs: list[Job]) -> list[Job]:
 
 
 def is_done(job: Job) -> bool:
-    """True when the job's output exists and is at least as new as its input."""
-    try:
-        return os.stat(job.output).st_mtime_ns >= os.stat(job.input).st_mtime_ns
-    except OSError:
-        return False
+    """True when every output the job writes is known and up to date (``is_current``); a
+    per-label job over every label is never done before it has read its file."""
+    outputs = job.known_outputs()
+    return outputs is not None and all(is_current(job.input, output) for output in outputs)
 
 
 def cpu_count() -> int:
@@ -198,14 +206,15 @@ def cpu_count() -> int:
 # --- engines --------------------------------------------------------------------------------
 
 
-def run_serial(jobs, options: RemeshOptions, on_row, func=run_job) -> None:
-    """Every job in this process, one after another."""
+def run_serial(jobs, options: RemeshOptions, on_rows, func=run_job) -> None:
+    """Every job in this process, one after another; ``on_rows(job, rows)`` as each ends."""
     for job in jobs:
-        on_row(func(job, options))
+        on_rows(job, func(job, options))
 
 
-def run_pool(jobs, options: RemeshOptions, workers: int, on_row, func=run_job) -> None:
-    """Every job in a pool of ``workers`` processes; ``on_row`` (in this process) gets the rows.
+def run_pool(jobs, options: RemeshOptions, workers: int, on_rows, func=run_job) -> None:
+    """Every job in a pool of ``workers`` processes; ``on_rows(job, rows)`` (in this process)
+    gets each job's rows as it ends.
 
     At most ``IN_FLIGHT_PER_WORKER * workers`` jobs are handed out at a time. When a worker dies
     the pool breaks; the jobs that were handed out are then re-run one by one, each alone in a
@@ -225,16 +234,16 @@ def run_pool(jobs, options: RemeshOptions, workers: int, on_row, func=run_job) -
             for future in done:
                 job = running.pop(future)
                 try:
-                    on_row(future.result())
+                    on_rows(job, future.result())
                 except BrokenProcessPool:
                     running[future] = job  # a suspect: re-run below
                     broken = True
                 except Exception as exc:
-                    on_row(failed_row(job, options, f"{type(exc).__name__}: {exc}"))
+                    on_rows(job, [failed_row(job, options, f"{type(exc).__name__}: {exc}")])
             if broken:
                 pool.shutdown(wait=True)
                 for job in list(running.values()):
-                    on_row(_run_alone(job, options, threads, func))
+                    on_rows(job, _run_alone(job, options, threads, func))
                 running.clear()
                 pool = _new_pool(workers, options, threads)
     except BaseException:
@@ -251,15 +260,15 @@ def _new_pool(workers: int, options: RemeshOptions, threads: int) -> ProcessPool
                                initargs=(options, threads, os.getpid()))
 
 
-def _run_alone(job: Job, options: RemeshOptions, threads: int, func) -> dict:
-    """A suspect job of a broken pool, alone in a fresh process: its row, or a failed row if
+def _run_alone(job: Job, options: RemeshOptions, threads: int, func) -> list[dict]:
+    """A suspect job of a broken pool, alone in a fresh process: its rows, or a failed row if
     that process dies too."""
     pool = _new_pool(1, options, threads)
     try:
         return pool.submit(func, job, options).result()
     except BrokenProcessPool:
-        return failed_row(job, options, "the worker process died while remeshing this file "
-                          "(out of memory? a crash in a library?)")
+        return [failed_row(job, options, "the worker process died while remeshing this file "
+                           "(out of memory? a crash in a library?)")]
     except BaseException:
         _terminate(pool)
         raise
@@ -349,12 +358,18 @@ def write_rows(path, rows, fields=CSV_FIELDS) -> None:
 
 def remesh_many(inputs, out_dir, options: RemeshOptions | None = None, *, fmt: str = "ply",
                 workers: int | None = None, engine: str = "local", scheduler: str | None = None,
-                overwrite: bool = False, progress: bool = False, **changes) -> list[dict]:
+                overwrite: bool = False, progress: bool = False, per_label: bool = False,
+                labels=None, **changes) -> list[dict]:
     """Remesh every input (files, folders, manifests) into ``out_dir``; the rows of batch.csv.
 
     Args:
         inputs: paths of files, folders (recursive) and manifests; see the module docstring.
         out_dir: output folder (created); receives one ``<name>.<fmt>`` per input + batch.csv.
+        per_label: read each input as a label map (.nii .nii.gz .npy .npz) and write one
+            ``<name>_label-<value>.<fmt>`` per label (``labelmaps.label_output_path``).
+        labels: only these labels (ints or a ``labelmaps.parse_labels`` string such as
+            "1,3,7"; implies ``per_label``); a label missing from a file is that label's
+            failed row.
         fmt: "ply", "obj", "stl" or "glb".
         options: the ``RemeshOptions`` of every file, with ``changes`` to its fields, as for
             ``pipeline.remesh_file`` / ``agndc remesh`` (``threads``: per job; None = the
@@ -365,53 +380,76 @@ def remesh_many(inputs, out_dir, options: RemeshOptions | None = None, *, fmt: s
         progress: show a tqdm bar (files/s, ETA) on stderr.
 
     Returns:
-        One dict per input, in input order, with the CSV_FIELDS keys; status "ok", "failed"
-        (error says why) or "skipped". Bad inputs never raise; bad arguments raise AGNDCError.
+        One dict per output (per input; per label of each input with ``per_label``), in input
+        order (then label order), with the CSV_FIELDS keys; status "ok", "failed" (error says
+        why) or "skipped". Bad inputs never raise; bad arguments raise AGNDCError.
     """
     batch = RemeshOptions.of(options, **changes)
     if batch.checkpoint:  # absolute: workers may run in another folder or host
         batch = RemeshOptions.of(batch, checkpoint=os.path.abspath(batch.checkpoint))
     workers = cpu_count() if workers is None else workers
     _check_arguments(batch, fmt, workers, engine, scheduler)
+    wanted = _wanted_labels(batch, per_label, labels)
     out_dir = Path(out_dir)
     jobs = discover_inputs(inputs, out_dir, fmt=fmt)
+    if wanted is not None:
+        jobs = [replace(job, per_label=True, labels=wanted, overwrite=overwrite) for job in jobs]
     out_dir.mkdir(parents=True, exist_ok=True)
     remove_temp_files(out_dir)
     previous = {row.get("output"): row for row in read_rows(out_dir / CSV_NAME)}
-    rows: dict[str, dict] = {}
+    rows: dict[str, list[dict]] = {}  # job output -> the job's rows
     log = CsvLog(out_dir / CSV_NAME)
     todo = []
     for job in jobs:
         if overwrite or not is_done(job):
             todo.append(job)
         else:
-            rows[job.output] = _skipped_row(job, previous.get(job.output))
-            log.write(rows[job.output])
+            rows[job.output] = [_skipped_row(job.input, output, label, previous.get(output))
+                                for output, label in zip(job.known_outputs(),
+                                                         job.labels or [""])]
+            for row in rows[job.output]:
+                log.write(row)
     bar = _progress_bar(len(todo), len(jobs) - len(todo), enabled=progress)
 
-    def on_row(row: dict) -> None:
-        rows[row["output"]] = row
-        log.write(row)
+    def on_rows(job: Job, job_rows: list[dict]) -> None:
+        # an output the job found up to date keeps the previous run's numbers, as above
+        rows[job.output] = [_skipped_row(row["input"], row["output"], row["label"],
+                                         previous.get(row["output"]))
+                            if row["status"] == "skipped" else row for row in job_rows]
+        for row in rows[job.output]:
+            log.write(row)
         bar.update(1)
-        if row["status"] == "failed":
-            bar.set_postfix(failed=sum(r["status"] == "failed" for r in rows.values()))
+        if any(row["status"] == "failed" for row in job_rows):
+            bar.set_postfix(failed=sum(row["status"] == "failed"
+                                       for job_rows in rows.values() for row in job_rows))
 
     try:
         if engine == "dask":
             from .batch_dask import run_dask  # batch_dask imports batch_job, not this module
 
-            run_dask(todo, batch, workers, scheduler, on_row)
+            run_dask(todo, batch, workers, scheduler, on_rows)
         elif workers == 1 or len(todo) <= 1:
-            run_serial(todo, batch, on_row)
+            run_serial(todo, batch, on_rows)
         else:
-            run_pool(todo, batch, min(workers, len(todo)), on_row)
+            run_pool(todo, batch, min(workers, len(todo)), on_rows)
     finally:
         bar.close()
         log.close()
         remove_temp_files(out_dir)
-    ordered = [rows[job.output] for job in jobs]
+    ordered = [row for job in jobs for row in rows[job.output]]
     write_rows(out_dir / CSV_NAME, ordered)
     return ordered
+
+
+def _wanted_labels(options: RemeshOptions, per_label: bool, labels) -> tuple[int, ...] | None:
+    """The labels a per-label batch meshes (empty: every label of each file), checked before
+    any work; None when the batch is not per label."""
+    if isinstance(labels, str):
+        labels = parse_labels(labels)
+    if not (per_label or labels):
+        return None
+    check_grid_method(options.method)
+    return tuple(dict.fromkeys(int(label) for label in labels or ()))
 
 
 def _check_arguments(options: RemeshOptions, fmt, workers, engine, scheduler) -> None:
@@ -440,9 +478,11 @@ def _check_arguments(options: RemeshOptions, fmt, workers, engine, scheduler) ->
             raise AGNDCError(f"checkpoint not found: {checkpoint}")
 
 
-def _skipped_row(job: Job, previous: dict | None) -> dict:
-    """A skipped job's row: the previous run's numbers for it, if batch.csv had them."""
-    row = dict(previous or {}, input=job.input, output=job.output, status="skipped", error="")
+def _skipped_row(source: str, output: str, label, previous: dict | None) -> dict:
+    """The row of an output that is up to date: the previous run's numbers for it, if
+    batch.csv had them."""
+    row = dict(previous or {}, input=source, output=output, label=label, status="skipped",
+               error="")
     return {key: row.get(key, "") for key in CSV_FIELDS}
 
 
@@ -454,7 +494,8 @@ def _progress_bar(total: int, skipped: int, *, enabled: bool):
 
 
 def summary(rows: list[dict]) -> dict:
-    """Counts per status: {"ok": n, "failed": n, "skipped": n}."""
+    """Counts per status: {"ok": n, "failed": n, "skipped": n} (outputs: per label when the
+    batch is per label)."""
     return {status: sum(row["status"] == status for row in rows)
             for status in ("ok", "failed", "skipped")}
 

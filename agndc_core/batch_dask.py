@@ -6,7 +6,7 @@ workers, which read the inputs and write the outputs themselves (paths are absol
 workers need the same filesystem, and ``agndc_core`` installed). A ``WorkerPlugin`` prepares
 every worker once, also workers that join later: torch's share of the host's cores and the
 network in the per-process model cache; nothing but a path and the options travels per task.
-Results come back in completion order to ``on_row``; a worker that dies has its tasks retried
+Results come back in completion order to ``on_rows``; a worker that dies has its tasks retried
 by Dask, and a task that keeps killing workers ends as ``KilledWorker``, a failed row.
 """
 
@@ -55,9 +55,10 @@ class PrepareWorker(WorkerPlugin):
             pass  # each task meets the same error in remesh and reports it in its own row
 
 
-def run_dask(jobs, options: RemeshOptions, workers: int, scheduler: str | None, on_row) -> None:
+def run_dask(jobs, options: RemeshOptions, workers: int, scheduler: str | None,
+             on_rows) -> None:
     """Run ``jobs`` on the cluster at ``scheduler``, or on a new ``LocalCluster`` of ``workers``
-    single-threaded processes; ``on_row`` gets each row as its task ends."""
+    single-threaded processes; ``on_rows(job, rows)`` gets each job's rows as its task ends."""
     if not jobs:
         return
     cluster = None
@@ -82,11 +83,12 @@ def run_dask(jobs, options: RemeshOptions, workers: int, scheduler: str | None, 
         futures = client.map(run_job, jobs, options=options, pure=False)
         job_of = {future.key: job for future, job in zip(futures, jobs, strict=True)}
         for future in as_completed(futures):
+            job = job_of[future.key]
             if future.status == "finished":
-                on_row(future.result())
+                on_rows(job, future.result())
             else:
                 exc = future.exception()
-                on_row(failed_row(job_of[future.key], options, f"{type(exc).__name__}: {exc}"))
+                on_rows(job, [failed_row(job, options, f"{type(exc).__name__}: {exc}")])
             future.release()
     except BaseException:
         if futures:

@@ -59,12 +59,7 @@ def _parser() -> argparse.ArgumentParser:
                    "triangles of one dual-contouring quad into a quad, the rest stays "
                    "triangles (docs/quads.md); .stl/.glb and a coloured .ply hold triangles "
                    "only, and marching cubes and low poly make no quads")
-    p.add_argument("--per-label", action="store_true",
-                   help="label maps (.nii .nii.gz .npy .npz): one mesh per label (each "
-                   "positive value), written beside OUTPUT as <name>_label-<value>.<ext> "
-                   "(docs/labelmaps.md)")
-    p.add_argument("--labels", metavar="LIST",
-                   help="only these labels, e.g. 1,3,7 (implies --per-label)")
+    _add_label_options(p, "beside OUTPUT as <name>_label-<value>.<ext>")
     p.set_defaults(func=_cmd_remesh)
 
     p = sub.add_parser("batch", help="remesh many files (files, folders, manifests) into a "
@@ -88,6 +83,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="torch threads per job (default: the cores divided by the workers)")
     p.add_argument("--overwrite", action="store_true",
                    help="redo outputs that already exist and are newer than their input")
+    _add_label_options(p, "as OUTDIR/<name>_label-<value>.<format>, one batch.csv row each; "
+                       "a label missing from a file is that label's failed row")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_batch)
 
@@ -162,6 +159,16 @@ def _add_remesh_options(p) -> None:
     p.add_argument("--target-faces", type=int, metavar="N",
                    help="low poly: decimate to about N faces (at most N; with --decimate-error "
                         "the bound stops it first)")
+
+
+def _add_label_options(p, written: str) -> None:
+    """--per-label and --labels, which ``agndc remesh`` and ``agndc batch`` share; ``written``
+    says where the label meshes go."""
+    p.add_argument("--per-label", action="store_true",
+                   help="label maps (.nii .nii.gz .npy .npz): one mesh per label (each "
+                   f"positive value), written {written} (docs/labelmaps.md)")
+    p.add_argument("--labels", metavar="LIST",
+                   help="only these labels, e.g. 1,3,7 (implies --per-label)")
 
 
 def _add_normal_filter_option(p) -> None:
@@ -242,13 +249,10 @@ def _result_line(result) -> str:
 
 def _remesh_labels(args) -> int:
     """``agndc remesh --per-label``: each label's mesh written as soon as it is made."""
-    from .gridio import is_grid_path, save_mesh
+    from .gridio import save_mesh
     from .labelmaps import iter_remesh_labels, label_output_path, load_label_map
 
-    if not is_grid_path(args.input):
-        raise AGNDCError(f"{args.input.name}: --per-label reads a label map (.nii .nii.gz .npy "
-                         ".npz), not a mesh")
-    volume = load_label_map(args.input)
+    volume = load_label_map(args.input)  # a mesh or a one-solid grid file: an error naming it
     counts = volume.labels()
     chosen = volume.select(args.labels)  # unknown labels fail before any work
     print(f"{args.input.name}: {len(counts)} labels, meshing {len(chosen)}")
@@ -305,13 +309,15 @@ def _cmd_batch(args) -> int:
                            workers=args.workers,
                            engine=args.engine or ("dask" if args.scheduler else "local"),
                            scheduler=args.scheduler, overwrite=args.overwrite,
-                           progress=not args.no_progress)
+                           progress=not args.no_progress, per_label=args.per_label,
+                           labels=args.labels)
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
     for row in rows:
         if row["status"] == "failed":
-            print(f"FAILED {row['input']}: {row['error']}", file=sys.stderr)
+            label = f" label {row['label']}" if row["label"] != "" else ""
+            print(f"FAILED {row['input']}{label}: {row['error']}", file=sys.stderr)
     counts = summary(rows)
     print(f"{counts['ok']} done, {counts['skipped']} skipped (up to date), {counts['failed']} "
           f"failed; table: {args.output / 'batch.csv'}")

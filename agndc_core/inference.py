@@ -21,9 +21,9 @@ positions as the whole lattice does; only information from beyond the halo is lo
 Progress and cancellation reach *inside* each tile: the numpy network calls the reporter
 between layers and between chunks of rows; for torch, a thread-local ``TorchFunctionMode``
 sees every torch call. Each call checks ``cancel`` and reports progress at most every
-``PROGRESS_INTERVAL`` seconds, interpolated within the tile from its share of the surface (the
-band's size) and the speed measured on the tiles before it. This module does not load
-torch.
+``PROGRESS_INTERVAL`` seconds, interpolated within the tile from its expected work (its share of
+the surface, the band's size, weighted by its scale: ``_work``) and the speed measured on the
+tiles before it (``progress.interpolated_share``). This module does not load torch.
 """
 
 from __future__ import annotations
@@ -35,6 +35,7 @@ import numpy as np
 
 from .errors import AGNDCError, CancelledError, GridError
 from .grid import LATTICE_PAD, occupancy_pyramid, pad_to_lattice
+from .progress import PROGRESS_INTERVAL, interpolated_share
 from .runtime.band import sigmoid
 
 #: band vs dense agreement (absolute, network output units) where the band covers the network's
@@ -50,13 +51,17 @@ AUTO_TILE_LIMIT = 160 ** 3
 #: tile core edge (lattice points) used when tiling automatically: ~2 GB peak at width 64
 AUTO_TILE = 128
 MODES = ("band", "dense")
-#: seconds between progress reports from inside a tile. Cancellation is checked on every torch
-#: call (15,368 calls in a 20 s 155³ run, at most 0.23 s apart): ``benchmarks/bench_cancel.py``
-#: measured a stop 0.01-0.06 s after cancel at 155³ (1 thread, 2-core CPU shared with a training
-#: job), progress every 0.11 s (median; longest gap 0.28 s) and no measurable overhead
-PROGRESS_INTERVAL = 0.1
-#: within a tile the interpolated progress stops at this share of the tile until it ends
-TILE_PROGRESS_CAP = 0.97
+#: Progress is reported every ``progress.PROGRESS_INTERVAL`` s from inside a tile.
+#: Cancellation is checked on every torch call (15,368 calls in a 20 s 155³ run, at most 0.23 s
+#: apart): ``benchmarks/bench_cancel.py`` measured a stop 0.01-0.06 s after cancel at 155³
+#: (1 thread, 2-core CPU shared with a training job), progress every 0.11 s (median; longest gap
+#: 0.28 s) and no measurable overhead.
+#: Seconds per unit of ``_work`` at each scale relative to the finest: each coarser scale costs
+#: about half as much per surface point (measured with the shipped AGNDC, 2 threads: scales 0, 1,
+#: 2 took 118, 55 and 28 us per unit on a brain-sized mask, 79, 42 and 26 us on a CAD part at
+#: 128³). With one cost for every scale, the finest scale's time would be predicted from the
+#: coarser ones at about half its length, and the bar would wait at the end of its share.
+SCALE_COST_RATIO = 0.5
 
 
 def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = None,
@@ -205,7 +210,7 @@ def _predict_band(model, lattice: np.ndarray, radius, tile: int, report, channel
         align = math.lcm(cfg.window, periods[s], 2 if s < levels else 1)
         plans.append(list(_tiles(grids[s].shape, tile, align)))
         surface = _surface_points(grids[s])
-        weights.append([_work(surface, region) for _, region in plans[s]])
+        weights.append([_work(surface, region, s) for _, region in plans[s]])
     total = sum(map(sum, weights))
     done, coarser = 0.0, None
     for s in reversed(range(levels + 1)):
@@ -277,10 +282,10 @@ def _surface_points(grid: np.ndarray) -> np.ndarray:
     return surface
 
 
-def _work(surface: np.ndarray, region) -> float:
-    """Relative cost of one tile: its surface points (the band) plus a little per point for the
-    dense steps (measured: the per-scale times of a 155³ run follow the surface counts)."""
-    return float(surface[region].sum()) + _volume(region) / 100.0
+def _work(surface: np.ndarray, region, scale: int = 0) -> float:
+    """Relative cost of one tile of a scale: its surface points (the band) plus a little per
+    point for the dense steps, times ``SCALE_COST_RATIO`` per scale above the finest."""
+    return (float(surface[region].sum()) + _volume(region) / 100.0) * SCALE_COST_RATIO ** scale
 
 
 class _Reporter:
@@ -328,7 +333,7 @@ class _Reporter:
         share = 0.0
         if self.work_done > 0 and self.work > 0:
             expected = self.seconds_done / self.work_done * self.work
-            share = min((now - self.start) / expected, TILE_PROGRESS_CAP)
+            share = interpolated_share(now - self.start, expected)
         self(self.lo + (self.hi - self.lo) * share, self.message)
 
 

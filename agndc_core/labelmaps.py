@@ -33,6 +33,7 @@ import numpy as np
 from .errors import AGNDCError, CancelledError, GridError
 from .grid import MAX_VOXELS, VoxelGrid
 from .gridio import (  # noqa: F401  (MergedLabelsWarning: part of this module's API)
+    LABEL_EXTENSIONS,
     MergedLabelsWarning,
     shown_values,
 )
@@ -90,6 +91,19 @@ class LabelMap:
             GridError when the volume holds no label; AGNDCError naming the wanted labels that
             are not present, and the ones that are.
         """
+        wanted = self.wanted(wanted)
+        missing = [label for label in wanted if label not in self.labels()]
+        if missing:
+            raise AGNDCError(self.missing_message(missing))
+        return wanted
+
+    def wanted(self, wanted=None) -> list[int]:
+        """``select``'s labels without the check that each is present: every label present
+        (``wanted`` None or empty), else ``wanted`` in its own order, duplicates dropped. A batch
+        meshes the present ones and reports each missing one (``missing_message``) on its own.
+
+        Raises GridError when the volume holds no label.
+        """
         present = self.labels()
         if not present:
             raise GridError(f"{self.source}: no label to mesh (every voxel is 0 or negative)")
@@ -97,12 +111,12 @@ class LabelMap:
             wanted = parse_labels(wanted)
         if not wanted:
             return list(present)
-        wanted = list(dict.fromkeys(int(label) for label in wanted))
-        missing = [label for label in wanted if label not in present]
-        if missing:
-            raise AGNDCError(f"{self.source}: no label {shown_values(missing)}; the labels present "
-                             f"are {shown_values(list(present))}")
-        return wanted
+        return list(dict.fromkeys(int(label) for label in wanted))
+
+    def missing_message(self, missing) -> str:
+        """Why labels cannot be meshed: ``seg.nii.gz: no label 4; the labels present are 1, 3``."""
+        return (f"{self.source}: no label {shown_values(list(missing))}; the labels present are "
+                f"{shown_values(list(self.labels()))}")
 
     def grid(self, label: int, *, crop: bool = True, margin: int = CROP_MARGIN) -> VoxelGrid:
         """The grid of one label: (X', Y', Z') bool ``values == label`` and its affine.
@@ -194,9 +208,13 @@ def parse_labels(text: str | None) -> list[int] | None:
 
 def load_label_map(path) -> LabelMap:
     """Read a label map from a NIfTI (.nii, .nii.gz), .npy or .npz file (``gridio``'s readers),
-    keeping the file's affine. Raises GridFileError / GridError as ``gridio.load_grid``."""
-    from .gridio import load_grid_values
+    keeping the file's affine. Raises GridFileError / GridError as ``gridio.load_grid``, and
+    AGNDCError for a mesh file."""
+    from .gridio import is_mesh_path, load_grid_values
 
+    if is_mesh_path(path):  # said plainly: the readers would only call it an unknown grid
+        raise AGNDCError(f"{Path(path).name}: --per-label reads a label map "
+                         f"({' '.join(LABEL_EXTENSIONS)}), not a mesh")
     values, affine = load_grid_values(path)
     return LabelMap(values, affine, source=Path(path).name)
 
@@ -252,17 +270,13 @@ def iter_remesh_labels(source, options=None, *, labels=None, affine=None, progre
         CancelledError when cancelled.
     """
     from .options import RemeshOptions
-    from .pipeline import remesh, subrange
+    from .pipeline import subrange
 
     options = RemeshOptions.of(options, **changes)
-    method = options.method
-    if method in MESH_ONLY_METHODS:
-        raise AGNDCError(f"method {method!r} contours a mesh's own surface: a label map is a "
-                         "voxel grid, choose a grid method")
+    check_grid_method(options.method)
     volume = as_label_map(source, affine)
     chosen = volume.select(labels)
-    crop = crop and reframe
-    weights = np.array([max(label_estimate(volume.grid(label), method), 1e-3)
+    weights = np.array([max(label_estimate(volume.grid(label), options.method), 1e-3)
                         for label in chosen])
     starts = np.concatenate([[0.0], np.cumsum(weights)]) / weights.sum()
     for label, lo, hi in zip(chosen, starts[:-1], starts[1:]):
@@ -271,8 +285,26 @@ def iter_remesh_labels(source, options=None, *, labels=None, affine=None, progre
         report = subrange(progress, lo, hi)
         if report is not None:
             report = _prefixed(report, f"label {label}: ")
-        yield label, remesh(volume.grid(label, crop=crop), options, progress=report,
-                            cancel=cancel, reframe=reframe)
+        yield label, remesh_label(volume, label, options, progress=report, cancel=cancel,
+                                  crop=crop, reframe=reframe)
+
+
+def remesh_label(volume: LabelMap, label: int, options, *, progress=None, cancel=None,
+                 crop: bool = True, reframe: bool = True):
+    """The ``RemeshResult`` of one label of a label map (``iter_remesh_labels`` and the
+    per-label batch job mesh each label through this): its grid, cropped unless ``crop`` or
+    ``reframe`` is off (module docstring), remeshed with ``options`` (a ``RemeshOptions``)."""
+    from .pipeline import remesh
+
+    return remesh(volume.grid(label, crop=crop and reframe), options, progress=progress,
+                  cancel=cancel, reframe=reframe)
+
+
+def check_grid_method(method: str) -> None:
+    """AGNDCError for a method that cannot mesh a label map (it needs a mesh's own surface)."""
+    if method in MESH_ONLY_METHODS:
+        raise AGNDCError(f"method {method!r} contours a mesh's own surface: a label map is a "
+                         "voxel grid, choose a grid method")
 
 
 def remesh_labels(source, options=None, **arguments) -> dict:

@@ -217,7 +217,7 @@ def chamfer_distance(pred_vertices, pred_faces, gt_vertices, gt_faces, *,
     and edge metrics (most of ``evaluate``'s time); ``check()`` runs between its steps (e.g.
     raises ``CancelledError`` when a run is cancelled)."""
     gt_pts, _, pred = _normalised_samples(pred_vertices, pred_faces, gt_vertices, gt_faces,
-                                          n_samples, seed)
+                                          n_samples, seed, check)
     if pred is None:
         return float(WORST_CASE["cd"])
     pred_pts = pred[0]
@@ -231,15 +231,18 @@ def chamfer_distance(pred_vertices, pred_faces, gt_vertices, gt_faces, *,
 
 
 def _normalised_samples(pred_vertices, pred_faces, gt_vertices, gt_faces, n_samples: int,
-                        seed: int):
+                        seed: int, check=None):
     """Samples of both surfaces in the ground truth's normalised frame: (gt points, gt normals,
-    (pred points, pred normals) or None when the prediction has no surface)."""
+    (pred points, pred normals) or None when the prediction has no surface). ``check()`` runs
+    between the two surfaces (sampling a dense source is most of a distance's time)."""
     center, scale = normalization(gt_vertices)
     gt_v = (np.asarray(gt_vertices, dtype=np.float64) - center) / scale
     pred_v = (np.asarray(pred_vertices, dtype=np.float64).reshape(-1, 3) - center) / scale
     pred_f = np.asarray(pred_faces, dtype=np.int64).reshape(-1, 3)
     rng = np.random.default_rng(seed)
     gt_pts, gt_nrm = sample_surface(gt_v, gt_faces, n_samples, rng)
+    if check is not None:
+        check()
     if not _has_area(pred_v, pred_f):
         return gt_pts, gt_nrm, None
     return gt_pts, gt_nrm, sample_surface(pred_v, pred_f, n_samples, rng)

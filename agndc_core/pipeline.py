@@ -36,8 +36,9 @@ winding once, after the world mapping, for every method.
 
 from __future__ import annotations
 
+import math
+import os
 import sys
-import time
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -45,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from .contour import dual_contour
-from .errors import AGNDCError, CancelledError, MeshError
+from .errors import AGNDCError, MeshError
 from .grid import LATTICE_PAD, VoxelGrid, crossed_edges, lattice_to_world, pad_to_lattice
 from .methods import (  # noqa: F401  (the registry's lists, re-exported: one definition)
     BOUNDED_METHODS,
@@ -54,6 +55,7 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     METHODS,
 )
 from .options import RemeshOptions
+from .progress import Stages, subrange  # noqa: F401  (subrange: part of this module's API)
 
 #: largest simplify tolerance (voxels) a target face count may use: beyond about a voxel the
 #: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
@@ -95,37 +97,36 @@ class RemeshResult:
         return quad_mesh(self, **options)
 
 
-class _Stages:
-    """Times named stages, reports progress and honours cancellation between them."""
+def expected_stages(options: RemeshOptions, *, crossings: float, points: float,
+                    bounded: bool = False) -> dict[str, float]:
+    """{stage: expected seconds} of ``remesh`` with ``options``, in the order it runs them
+    (``plan.stage_seconds``): the spans of its progress bar (``progress.Stages``).
 
-    def __init__(self, progress, cancel):
-        self.progress, self.cancel, self.timings = progress, cancel, {}
-        self._start = time.perf_counter()
+    Args:
+        crossings, points: the lattice's crossed edges and points; bounded: the grid has
+            source bounds (``VoxelGrid.source_bounds``: a voxelised mesh).
+    """
+    from .plan import stage_seconds
 
-    def check(self) -> None:
-        """Raise CancelledError once the run is cancelled (also called inside long stages)."""
-        if self.cancel is not None and self.cancel.is_set():
-            raise CancelledError("remesh cancelled")
-
-    def run(self, name: str, fraction: float, func, *args, **kwargs):
-        self.check()
-        if self.progress is not None:
-            self.progress(fraction, name)
-        start = time.perf_counter()
-        out = func(*args, **kwargs)
-        self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - start
-        return out
-
-    @property
-    def seconds(self) -> float:
-        return time.perf_counter() - self._start
-
-
-def subrange(progress, lo: float, hi: float):
-    """A progress callback that maps [0, 1] onto [lo, hi] of ``progress`` (None stays None)."""
-    if progress is None:
-        return None
-    return lambda fraction, message: progress(lo + (hi - lo) * fraction, message)
+    method = options.method
+    threads = options.threads or os.cpu_count() or 1
+    if method in ("mc", "mc_taubin"):
+        names = ["marching cubes"] + (["taubin smoothing"] if method == "mc_taubin" else [])
+    else:
+        learned = method in CHECKPOINT_NAMES
+        names = ["surface nets" if method == "surfacenets" else
+                 "predict" if learned else "intersection vertices"]
+        if learned and options.flat_patches:
+            names += ["flat patches"] + (["terraced planes"] if TERRACED_PLANES else [])
+        if options.source_bounds and method in BOUNDED_METHODS and bounded:
+            names.append("source bounds")
+        names.append("dual contouring")
+        if learned:
+            names += (["normal filter"] if options.normal_filter else []) + ["fold check"]
+    if options.low_poly:
+        names.append("low poly")
+    return {name: stage_seconds(name, method=method, crossings=crossings, points=points,
+                                threads=threads) for name in names}
 
 
 def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=None,
@@ -167,76 +168,91 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
         from .decimate import check_options
 
         check_options(decimate_error, target_faces)  # before the long stages, not after
-    stages = _Stages(progress, cancel)
+    expected = None
+    if progress is not None:  # the stages' spans of the bar, from the grid's size
+        from .plan import grid_crossings
+
+        expected = expected_stages(opts, crossings=grid_crossings(grid.occupancy),
+                                   points=lattice_points(grid.shape),
+                                   bounded=grid.source_bounds is not None)
+    stages = Stages(progress, cancel, expected)
     face_quads = None
     if method in ("mc", "mc_taubin"):
         from .mc import marching_cubes_lattice
 
         lattice = pad_to_lattice(grid.occupancy, levels=0)
-        vertices, faces = stages.run("marching cubes", 0.1, marching_cubes_lattice, lattice)
+        vertices, faces = stages.run("marching cubes", marching_cubes_lattice, lattice)
         if method == "mc_taubin":
-            vertices = stages.run("taubin smoothing", 0.6, taubin_smooth, vertices, faces)
+            vertices = stages.run("taubin smoothing", taubin_smooth, vertices, faces)
     else:
         lattice = pad_to_lattice(grid.occupancy)
         if method == "surfacenets":
             from .surfacenets import surface_nets_lattice
 
-            vertex = stages.run("surface nets", 0.05, surface_nets_lattice, lattice)
+            vertex = stages.run("surface nets", surface_nets_lattice, lattice)
         else:
-            vertex = stages.run("predict", 0.05, _predict, method, lattice, labels,
-                                checkpoint, threads, device, tile,
-                                subrange(progress, 0.05, 0.9), cancel, reframe)
+            # a network's vertices, or (mesh-only methods) those of the exact intersections
+            name = "predict" if method in CHECKPOINT_NAMES else "intersection vertices"
+            vertex = stages.run(name, _predict, method, lattice, labels, checkpoint, threads,
+                                device, tile, stages.sub(name), cancel, reframe)
         # where the flat-patch and bounds stages place a coordinate, the normal filter keeps it
         filtered = normal_filter and method in CHECKPOINT_NAMES  # a network's mesh
         pinned = np.zeros(vertex.shape, dtype=bool) if filtered else None
         if method in CHECKPOINT_NAMES and flat_patches:  # a network's vertices
             from .flatpatches import fit_terraced_planes, flatten_patches
 
-            vertex = stages.run("flat patches", 0.9, flatten_patches, lattice, vertex,
+            vertex = stages.run("flat patches", flatten_patches, lattice, vertex,
                                 in_place=True, pinned=pinned)
             if TERRACED_PLANES:
-                vertex = stages.run("terraced planes", 0.9, fit_terraced_planes, lattice,
-                                    vertex, in_place=True, pinned=pinned)
+                vertex = stages.run("terraced planes", fit_terraced_planes, lattice, vertex,
+                                    in_place=True, pinned=pinned)
         if opts.source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
-            vertex = stages.run("source bounds", 0.9, _snap_to_source_bounds, grid, lattice,
-                                vertex, pinned)
+            vertex = stages.run("source bounds", _snap_to_source_bounds, grid, lattice, vertex,
+                                pinned)
         edge = crossed_edges(lattice)
         # the later stages move vertices only: faces (and their quads) keep their order
         vertices, faces, face_quads = stages.run(
-            "dual contouring", 0.9, dual_contour, vertex, edge, lattice,
+            "dual contouring", dual_contour, vertex, edge, lattice,
             min_component_faces=min_component_faces, face_quads=True)
         if filtered:
-            vertices = stages.run("normal filter", 0.95, filter_contoured_mesh, vertices,
-                                  faces, vertex, pinned, check=stages.check)
+            vertices = stages.run("normal filter", filter_contoured_mesh, vertices, faces,
+                                  vertex, pinned, check=stages.check)
         if method in CHECKPOINT_NAMES:  # a network's vertices: no component turned inside out
-            vertices = stages.run("fold check", 0.97, unfold_components, vertices, faces,
-                                  lattice, edge, min_component_faces)
+            vertices = stages.run("fold check", unfold_components, vertices, faces, lattice,
+                                  edge, min_component_faces, check=stages.check)
     if low_poly:
         from .decimate import decimate
 
         # lattice coordinates: one unit is one voxel along each axis
-        vertices, faces = stages.run("low poly", 0.98, decimate, vertices, faces,
+        vertices, faces = stages.run("low poly", decimate, vertices, faces,
                                      max_error=decimate_error, target_faces=target_faces,
                                      max_tolerance=TARGET_TOLERANCE)
         face_quads = None  # decimated faces belong to no dual-contouring quad: triangles only
     world = lattice_to_world(vertices, grid.affine)
     faces = orient_to_affine(faces, grid.affine)
-    if progress is not None:
-        progress(1.0, "done")
+    stages.report(1.0, "done")
     return RemeshResult(world, faces, method, stages.seconds, stages.timings, grid, face_quads)
 
 
-def unfold_components(vertices, faces, lattice, edge, min_component_faces: int = 0):
+def lattice_points(shape) -> int:
+    """Points of a grid's padded lattice (``pad_to_lattice``, to within its rounding)."""
+    return math.prod(int(n) + 2 * LATTICE_PAD for n in shape)
+
+
+def unfold_components(vertices, faces, lattice, edge, min_component_faces: int = 0,
+                      check=None):
     """Components the network turned inside out take their surface nets vertices
     (``contour.restore_folded_components``). The same lattice and edges give the same vertices
     in the same order (only the quads' diagonals follow the positions), so the surface nets
-    vertices are compared on the network's own faces."""
+    vertices are compared on the network's own faces. ``check()`` runs between the steps."""
     from .contour import restore_folded_components
     from .surfacenets import surface_nets_cells
 
+    tick = check if check is not None else (lambda: None)
     reference, reference_faces = dual_contour(lambda cells: surface_nets_cells(lattice, cells),
                                               edge, lattice,
                                               min_component_faces=min_component_faces)
+    tick()
     if reference.shape != vertices.shape or reference_faces.shape != faces.shape:
         return vertices  # not the same surfaces (cannot happen for one lattice): leave them
     return restore_folded_components(vertices, faces, reference)[0]
@@ -315,27 +331,58 @@ def remesh_mesh(vertices, faces, options: RemeshOptions | None = None, *, source
     from .voxelize import voxelize
 
     opts = RemeshOptions.of(options, **changes)
-    stages = _Stages(progress, cancel)
-    grid = stages.run("voxelise", 0.0, voxelize, vertices, faces, opts.resolution, shift=shift,
+    expected = _expected_mesh_stages(vertices, faces, opts) if progress is not None else None
+    stages = Stages(progress, cancel, expected)
+    grid = stages.run("voxelise", voxelize, vertices, faces, opts.resolution, shift=shift,
                       source=source, check=stages.check)
-    # progress shares, measured at 64³-128³ (1 thread): the exact intersections take ~85 % of
-    # "sharp", the network ~99 % of "agndc"; MC is over in a tenth of a second either way
-    share, labels = 0.05, None
+    labels = None
     if opts.method in MESH_ONLY_METHODS:
         from .labels import make_labels
 
-        labels = stages.run("exact intersections", 0.05, make_labels, vertices, faces, grid,
+        labels = stages.run("exact intersections", make_labels, vertices, faces, grid,
                             levels=0, check=stages.check)
-        share = 0.8
     # a voxelised mesh is framed exactly as the training data were (voxelize + pad_to_lattice
     # leave its margins, thin unvoxelised ends included): re-framing it would only add noise
-    result = remesh(grid, opts, progress=subrange(progress, share, 1.0), cancel=cancel,
-                    labels=labels, reframe=False)
+    result = remesh(grid, opts, progress=stages.sub("remesh"), cancel=cancel, labels=labels,
+                    reframe=False)
     result.timings = {**stages.timings, **result.timings}
     # this function's clock started before voxelising and is still running: it already holds
     # the remesh (adding the two counted the remesh twice)
     result.seconds = stages.seconds
     return result
+
+
+def _expected_mesh_stages(vertices, faces, options: RemeshOptions) -> dict | None:
+    """{stage: expected seconds} of ``remesh_mesh``: voxelising and (mesh-only methods) the
+    exact intersections grow with the triangles, the remesh of the grid with its size; None
+    for a mesh ``voxelize`` will refuse (it says why)."""
+    from .plan import mesh_crossings
+    from .voxelize import grid_layout
+
+    vertices = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    extent = np.ptp(vertices, axis=0) if len(vertices) else np.zeros(3)
+    if not (np.all(np.isfinite(extent)) and extent.max() > 0 and len(faces)
+            and 3 <= options.resolution <= 1024):
+        return None
+    voxel, counts = grid_layout(extent, options.resolution)
+    return expected_mesh_stages(options, triangles=len(faces), points=lattice_points(counts),
+                                crossings=mesh_crossings(vertices, faces, voxel))
+
+
+def expected_mesh_stages(options: RemeshOptions, *, triangles: int, crossings: float,
+                         points: float) -> dict[str, float]:
+    """{stage: expected seconds} of ``remesh_mesh`` from the mesh's and its grid's sizes:
+    "voxelise", "exact intersections" (mesh-only methods) and "remesh" (``expected_stages``)."""
+    from .plan import stage_seconds
+
+    size = {"triangles": triangles, "crossings": crossings, "points": points}
+    expected = {"voxelise": stage_seconds("voxelise", **size)}
+    if options.method in MESH_ONLY_METHODS:
+        expected["exact intersections"] = stage_seconds("exact intersections", **size)
+    expected["remesh"] = sum(expected_stages(options, crossings=crossings, points=points,
+                                             bounded=True).values())
+    return expected
 
 
 def remesh_file(path, options: RemeshOptions | None = None, *, progress=None, cancel=None,

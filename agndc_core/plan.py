@@ -54,6 +54,41 @@ SERIAL_SHARE = {"agndc": 0.55, "agndc_fast": 0.55, "undc": 0.72}
 #: the Blender operator asks before a run estimated longer than this (seconds)
 CONFIRM_SECONDS = 10.0
 
+#: Expected seconds of each stage of a remesh (``pipeline.expected_stages``), which spread the
+#: progress bar over the stages (``progress.Stages``; the time shown before a run is
+#: ``CALIBRATION``'s): (s per million source triangles, s per million crossed lattice edges, s
+#: per million lattice points), a non-negative least-squares fit to the stage times of a
+#: generated CAD part subdivided to 12k-3.1M triangles at 64³ and 128³ and of a brain-sized
+#: 197x233x189 grid, every method, on ``FIT_THREADS`` network threads of a 2-core x86_64 machine
+#: under load (load average 6.7; the shares matter here, not the seconds; the fits are within
+#: 0.1-0.6 s of most stages, 1.7 s of voxelising, 4.2 s of Sharp's 2-33 s of intersections):
+#: ``python benchmarks/bench_estimate.py --stages`` prints these tables. "distance" is the
+#: Chamfer distance of one output to its source (30k samples).
+STAGE_SECONDS = {
+    "voxelise": (1.22, 0.0, 0.0),
+    "exact intersections": (7.87, 0.0, 3.03),
+    "intersection vertices": (0.0, 0.000111, 0.0),
+    "marching cubes": (0.0, 0.704, 0.0105),
+    "taubin smoothing": (0.0, 0.477, 0.0),
+    "surface nets": (0.0, 0.0, 0.143),
+    "flat patches": (0.0, 0.568, 0.107),
+    "terraced planes": (0.0, 0.0, 0.154),
+    "source bounds": (0.0, 0.191, 0.0),
+    "dual contouring": (0.0, 0.356, 0.0198),
+    "normal filter": (0.0, 10.8, 0.068),
+    "fold check": (0.0, 0.0, 0.201),
+    "low poly": (0.0, 169.0, 0.0),
+    "distance": (0.567, 0.675, 0.0),
+}
+#: the network ("predict") of each learned method, in the same form, on ``FIT_THREADS``
+#: threads (``SERIAL_SHARE`` scales it to other thread counts)
+NETWORK_SECONDS = {
+    "agndc": (0.0, 123.0, 0.461),
+    "agndc_fast": (0.0, 59.5, 0.585),
+    "undc": (0.0, 25.8, 0.16),
+}
+FIT_THREADS = 2
+
 
 @dataclass(frozen=True)
 class GridPlan:
@@ -163,10 +198,40 @@ def estimate_seconds(method: str, shape, crossings: float, *, distances: int = 0
             threads (``SERIAL_SHARE`` of a learned run does not speed up).
     """
     points = math.prod(int(n) + 2 for n in shape)  # the padded lattice
-    total = _seconds(CALIBRATION[method], crossings, points)
-    serial = SERIAL_SHARE.get(method, 1.0)
-    total *= serial + (1.0 - serial) / max(1, int(threads))
+    total = _seconds(CALIBRATION[method], crossings, points) * thread_factor(method, threads)
     return total + distances * _seconds(CALIBRATION["distance"], crossings, 0)
+
+
+def thread_factor(method: str, threads: int) -> float:
+    """A method's time on ``threads`` network threads over its time on one (Amdahl, with
+    ``SERIAL_SHARE``; 1 for the methods without a network)."""
+    serial = SERIAL_SHARE.get(method, 1.0)
+    return serial + (1.0 - serial) / max(1, int(threads))
+
+
+def stage_seconds(stage: str, *, method: str = "", triangles: float = 0, crossings: float = 0,
+                  points: float = 0, threads: int = FIT_THREADS) -> float:
+    """Expected seconds of one stage of a remesh (``STAGE_SECONDS``; the network's, stage
+    "predict", from ``NETWORK_SECONDS`` for ``method`` on ``threads`` threads); 0 for a stage
+    that takes no measurable time.
+
+    Args:
+        triangles: of the source mesh (0 for a grid); crossings: crossed lattice edges
+            (``grid_crossings`` or ``mesh_crossings``); points: lattice points.
+    """
+    if stage == "predict":
+        row = NETWORK_SECONDS.get(method)
+        if row is None:
+            return 0.0
+        scale = thread_factor(method, threads) / thread_factor(method, FIT_THREADS)
+        return scale * _stage_row(row, triangles, crossings, points)
+    row = STAGE_SECONDS.get(stage)
+    return 0.0 if row is None else _stage_row(row, triangles, crossings, points)
+
+
+def _stage_row(row, triangles, crossings, points) -> float:
+    per_triangle, per_crossing, per_point = row
+    return (per_triangle * triangles + per_crossing * crossings + per_point * points) / 1e6
 
 
 def _seconds(row, crossings: float, points: float) -> float:

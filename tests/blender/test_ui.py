@@ -201,13 +201,14 @@ def test_draw_functions(addon):
 
 def test_sidebar_shows_the_progress_of_a_run(addon):
     operators, panels = _operators(addon), importlib.import_module(f"{addon.module}.panels")
-    operators.RUN.begin(object())
+    operators.RUN.begin(object(), "Sharp")
     try:
-        operators.RUN.fraction, operators.RUN.message = 0.42, "Part: network scale 0"
+        operators.RUN.fraction, operators.RUN.message = 0.42, "Part: exact intersections"
         log = []
         panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)),
                                            bpy.context)
-        assert ("progress", 0.42) in log and ("label", "Part: network scale 0") in log
+        assert ("progress", 0.42) in log and ("label", "Part: exact intersections") in log
+        assert ("progress_text", "Sharp 42%") in log  # the method, as in the status bar
         assert not bpy.ops.object.agndc_remesh.poll()
     finally:
         operators.RUN.end()

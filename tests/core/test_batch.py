@@ -300,7 +300,8 @@ def test_dying_worker_fails_only_its_file(mixed, tmp_path):
         (folder / name).write_bytes((mixed / "a.npy").read_bytes())
     jobs = batch.discover_inputs([folder], tmp_path / "out")
     rows = []
-    batch.run_pool(jobs, batch.RemeshOptions(method="mc"), 2, rows.append, func=crash_on_marked)
+    batch.run_pool(jobs, batch.RemeshOptions(method="mc"), 2,
+                   lambda job, job_rows: rows.extend(job_rows), func=crash_on_marked)
     status = {Path(r["input"]).name: r["status"] for r in rows}
     assert status == {"crash.npy": "failed", "p.npy": "ok", "q.npy": "ok", "r.npy": "ok",
                       "s.npy": "ok"}
