@@ -118,7 +118,7 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
     """
     vertices, faces = check_mesh(vertices, faces)
     dims0 = np.array(pad_to_lattice(np.zeros(grid.shape, bool), max(levels, CASCADE_LEVELS)).shape)
-    rule = _choose_rule(faces, "auto")
+    rule = _choose_rule(faces, "auto", check)
     # fine lattice coordinates: voxel index + pad
     fine = grid.world_to_index(vertices) + LATTICE_PAD
     labels = []
@@ -126,7 +126,7 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
         offset, spacing = scale_lattice(level)
         dims = tuple(int(d) for d in dims0 // 2**level)
         frame = (fine - offset) / spacing
-        inside = inside_points(frame[faces], dims, rule=rule, check=check)
+        inside = inside_points(frame, faces, dims, rule=rule, check=check)
         edge = crossed_edges(inside)
         surface = surface_cells(edge)
         # sampled per scale, so coarse cells get the same sample density as fine ones
