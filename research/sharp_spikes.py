@@ -19,7 +19,13 @@ be measured wrongly in its own units):
 
 ``measure`` writes ``out/sharp_spikes/rows_<res>_<tag>.csv`` and the meshes, ``render`` draws the
 places where the first tag has its worst turned faces next to the same places in the other
-tags (turned faces red, the source's creases black).
+tags (turned faces red, the source's creases black); docs/images/sharp_notches_junction_64.png is
+
+    .venv/bin/python research/sharp_spikes.py render --res 64 --tags before after \
+        --shapes junction1 --place 1 --out docs/images/sharp_notches_junction_64.png
+
+where ``before`` is ``measure`` run with labels whose QEF held surface samples only (and pulled
+outside solutions towards the mass point), ``after`` with the current labels.
 """
 
 from __future__ import annotations
@@ -159,6 +165,8 @@ def cmd_render(args) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from agndc_core.study.report import save_small_png
+
     first = OUT / f"meshes_{args.res}_{args.tags[0]}"
     names = args.shapes or sorted(p.stem for p in first.glob("*.npz"))
     for name in names:
@@ -174,6 +182,8 @@ def cmd_render(args) -> None:
             if all(np.abs(centres[face] - p).max() > 2 * args.half for p in places):
                 places.append(centres[face])
         for k, place in enumerate(places):
+            if args.place is not None and k != args.place:
+                continue
             fig = plt.figure(figsize=(4.2 * len(VIEWS), 4.0 * len(meshes)), dpi=args.dpi)
             for row, (tag, mesh, turned) in enumerate(zip(args.tags, meshes, degrees)):
                 for col, (elev, azim) in enumerate(VIEWS):
@@ -185,8 +195,8 @@ def cmd_render(args) -> None:
                     ax.set_title(f"{name} {args.res}³, {tag}: {np.sum(turned > TURNED[0])} "
                                  f"turned faces in all", fontsize=8)
             fig.subplots_adjust(left=0, right=1, bottom=0, top=0.95, wspace=0, hspace=0.08)
-            png = OUT / f"{name}_{args.res}_{'_'.join(args.tags)}_{k}.png"
-            fig.savefig(png)
+            png = args.out or OUT / f"{name}_{args.res}_{'_'.join(args.tags)}_{k}.png"
+            save_small_png(fig, png)
             plt.close(fig)
             print(png)
 
@@ -255,6 +265,8 @@ def main(argv=None) -> None:
     render.add_argument("--places", type=int, default=2)
     render.add_argument("--half", type=float, default=3.0)
     render.add_argument("--dpi", type=int, default=90)
+    render.add_argument("--place", type=int, default=None, help="only the K-th place")
+    render.add_argument("--out", type=Path, default=None, help="the PNG (with --place)")
     export = sub.add_parser("export")
     export.add_argument("--out", type=Path, required=True)
     args = parser.parse_args(argv)
