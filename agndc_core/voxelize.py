@@ -49,6 +49,8 @@ def voxelize(vertices, faces, resolution: int = 64, *, margin: int = 1, rule: st
         its ``source_bounds`` is the mesh's bounding box.
     """
     vertices, faces, used = checked_surface(vertices, faces, source)
+    if check is not None:
+        check()
     if not 2 * margin + 1 <= resolution <= 1024:
         raise MeshError(f"{source}: resolution must be in [{2 * margin + 1}, 1024], "
                         f"got {resolution}")
@@ -215,6 +217,7 @@ def _choose_rule(faces: np.ndarray, rule: str, check=None) -> str:
     start = faces.reshape(-1)
     end = np.concatenate([faces[:, 1:], faces[:, :1]], axis=1).reshape(-1)
     n = int(start.max()) + 1
+    tick()
     # an edge, its repeats and its twin share their lower vertex: testing groups of lower
     # vertices one by one (about EDGE_CHUNK edges each) is testing all edges at once
     lower = np.minimum(start, end)
