@@ -9,20 +9,25 @@ For each scale s the labels live on that scale's lattice (grid.py, ``scale_latti
 * ``surface`` (D,) bool     cells with at least one crossed edge among their 12 edges;
 * ``vertex``  (D, 3) float32 the dual vertex of each surface cell as an offset in [0, 1]^3 from
                             its min corner (0 elsewhere; masked from the loss by ``surface``).
-* ``quadric`` (D, 6) float32 the mean of n n^T over the cell's surface samples (xx, yy, zz,
+* ``quadric`` (D, 6) float32 the mean of n n^T over the cell's surface data (xx, yy, zz,
                             xy, yz, zx): (x - v)^T Q (x - v) is the mean squared distance of x to
                             the tangent planes through v, the part of a vertex error that moves
                             the surface (flat cells: along the normal only; creases: off the
                             crease; corners: every direction). The training loss weighs by it.
 
-The vertex of a cell minimises the quadratic error of the planes of the true surface samples that
-fall inside the cell (a QEF, as in dual contouring), solved with truncated eigenvalues about the
-samples' mass point so flat and edge cells stay well posed; a solution outside the cell is pulled
-back along the segment towards the mass point (UNDC grows a Tikhonov pull until the vertex is
-inside, which has the same effect). Samples are deterministic (a low-discrepancy
-sequence inside each triangle plus points along its edges, ``SAMPLES_PER_CELL`` per cell side)
-and include every triangle's corners with that triangle's normal, so sharp corners and creases
-are represented in the cells that hold them.
+The vertex of a cell minimises the quadratic error of the planes of the true surface points of
+the cell (a QEF, as in dual contouring): the exact crossings of its 12 edges (the Hermite data of
+dual contouring, from the same rays as ``inside``) and deterministic samples of the surface
+inside it (a low-discrepancy sequence inside each triangle plus points along its edges,
+``SAMPLES_PER_CELL`` per cell side, so every triangle's corners and creases are represented in
+the cells that hold them), each with its triangle's normal. The crossings give every surface
+cell data, and every plane that crosses the cell's edges a weight of its own however little of
+the cell it covers, so a crease or corner that only clips a cell still draws its vertex. The QEF
+is solved with truncated eigenvalues about the data's mass point, so flat and edge cells stay
+well posed; a solution outside the cell is replaced by the QEF's minimum over the cell (on a
+crease that leaves the cell, the point of the crease inside it). A surface cell left without
+data takes the surface point closest to its centre (rare: the other axes' rays outvoted its
+edges' crossings).
 
 At scale 0 ``inside`` equals the voxelisation of the mesh (same rays, same frame), so the input
 grid and the labels agree exactly.
@@ -30,6 +35,7 @@ grid and the labels agree exactly.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +44,7 @@ from .grid import (  # noqa: F401  (lattice topology lives in grid.py; re-export
     CASCADE_LEVELS,
     CELL_EDGES,
     LATTICE_PAD,
+    OTHER_AXES,
     VoxelGrid,
     crossed_edges,
     pad_to_lattice,
@@ -45,7 +52,15 @@ from .grid import (  # noqa: F401  (lattice topology lives in grid.py; re-export
     surface_cells,
 )
 from .tolerances import tol
-from .voxelize import _choose_rule, check_mesh, inside_points
+from .voxelize import (
+    TRIANGLE_CHUNK,
+    _choose_rule,
+    check_mesh,
+    chunk_runs,
+    inside_from_crossings,
+    lattice_crossings,
+    ray_jitter,
+)
 
 SAMPLES_PER_CELL = 4  # samples along one side of a finest-scale cell: 16 per cell of flat surface
 
@@ -110,15 +125,16 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
         vertices: (V, 3) float world coordinates; faces: (F, 3) int.
         grid: the voxel grid (its affine places the lattice in world space).
         levels: number of coarser scales (the paper's j).
-        check: called between the steps (and inside the ray casting), e.g. raises
-            ``CancelledError`` when a run is cancelled.
+        check: called between the steps and between the chunks of each (ray casting,
+            sampling, the cells' sums and QEFs), e.g. raises ``CancelledError`` when a run is
+            cancelled.
 
     Returns:
         list of ScaleLabels, index = scale; scale s has lattice shape D0 / 2**s.
     """
     vertices, faces = check_mesh(vertices, faces)
     dims0 = np.array(pad_to_lattice(np.zeros(grid.shape, bool), max(levels, CASCADE_LEVELS)).shape)
-    rule = _choose_rule(faces, "auto")
+    rule = _choose_rule(faces, "auto", check)
     # fine lattice coordinates: voxel index + pad
     fine = grid.world_to_index(vertices) + LATTICE_PAD
     labels = []
@@ -126,26 +142,24 @@ def make_labels(vertices, faces, grid: VoxelGrid, levels: int = 2,
         offset, spacing = scale_lattice(level)
         dims = tuple(int(d) for d in dims0 // 2**level)
         frame = (fine - offset) / spacing
-        inside = inside_points(frame[faces], dims, rule=rule, check=check)
+        # one ray casting gives the inside points and the exact edge crossings
+        crossings = lattice_crossings(frame, faces, dims, check)
+        inside = inside_from_crossings(crossings, dims, rule)
         edge = crossed_edges(inside)
         surface = surface_cells(edge)
-        # sampled per scale, so coarse cells get the same sample density as fine ones
-        points, normals = surface_samples(frame[faces], spacing=1.0 / SAMPLES_PER_CELL,
-                                          check=check)
-        if check is not None:
-            check()
-        vertex, quadric = cell_vertices(points, normals, surface, frame, faces, check)
+        vertex, quadric = cell_vertices(frame, faces, crossings, surface, check)
         labels.append(ScaleLabels(inside, edge, surface, vertex, quadric))
     return labels
 
 
-#: samples per chunk of ``surface_samples`` (about 100 bytes each in temporaries)
-SAMPLE_CHUNK = 1 << 21
+#: samples per chunk of the sampling and of the cells' sums (about 100 bytes each in
+#: temporaries)
+SAMPLE_CHUNK = 1 << 19
 
 
-def surface_samples(triangles_fx3x3: np.ndarray, spacing: float,
+def surface_samples(vertices, faces, spacing: float,
                     check=None) -> tuple[np.ndarray, np.ndarray]:
-    """Deterministic samples of a triangle soup, about ``spacing`` apart, with face normals.
+    """Deterministic samples of a triangle mesh, about ``spacing`` apart, with face normals.
 
     Two kinds of samples, both per triangle and with that triangle's normal:
     * interior: ceil(area / spacing^2) points of the R2 low-discrepancy sequence folded into the
@@ -153,32 +167,11 @@ def surface_samples(triangles_fx3x3: np.ndarray, spacing: float,
     * boundary: points every ``spacing`` along each edge, starting at its first corner, so every
       corner and crease is sampled by all the faces that meet there.
 
-    Triangles are sampled in chunks of about ``SAMPLE_CHUNK`` samples, ``check()`` before each;
-    every sample depends on its own triangle only, so the chunks give the same arrays.
-
     Returns:
         points: (S, 3) float64; normals: (S, 3) float64 unit normals (degenerate faces dropped):
-        every interior sample, then every boundary sample.
+        every interior sample, then every boundary sample (``sample_chunks`` in one piece).
     """
-    tri = np.asarray(triangles_fx3x3, dtype=np.float64)
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area2 = np.linalg.norm(cross, axis=1)
-    keep = area2 > 1e-12
-    tri, normal, area = tri[keep], cross[keep] / area2[keep, None], area2[keep] / 2
-    count = np.ceil(area / spacing**2).astype(np.int64)  # interior samples of each triangle
-    start, end = tri.reshape(-1, 3), tri[:, [1, 2, 0]].reshape(-1, 3)
-    steps = np.maximum(np.ceil(np.linalg.norm(end - start, axis=1) / spacing), 1).astype(np.int64)
-    per_triangle = np.cumsum(count + steps.reshape(-1, 3).sum(axis=1))
-    total = int(per_triangle[-1]) if len(per_triangle) else 0
-    cuts = np.searchsorted(per_triangle, np.arange(SAMPLE_CHUNK, total, SAMPLE_CHUNK)) + 1
-    bounds = np.unique(np.concatenate([[0], cuts, [len(tri)]]))
-    parts = []
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        if check is not None:
-            check()
-        parts.append(_sample_triangles(tri[lo:hi], normal[lo:hi], count[lo:hi],
-                                       start[3 * lo:3 * hi], end[3 * lo:3 * hi],
-                                       steps[3 * lo:3 * hi]))
+    parts = list(sample_chunks(vertices, faces, spacing, check))
     if not parts:
         return np.zeros((0, 3)), np.zeros((0, 3))
     interior, interior_normals, boundary, boundary_normals = zip(*parts)
@@ -186,19 +179,57 @@ def surface_samples(triangles_fx3x3: np.ndarray, spacing: float,
             np.concatenate([*interior_normals, *boundary_normals]))
 
 
-def _sample_triangles(tri, normal, count, start, end, steps):
+def sample_chunks(vertices, faces, spacing: float, check=None):
+    """``surface_samples`` in chunks: yields (interior points, their normals, boundary points,
+    their normals) of consecutive runs of triangles holding about ``SAMPLE_CHUNK`` samples (at
+    most ``TRIANGLE_CHUNK`` triangles), ``check()`` before each, after a first pass that counts
+    each triangle's samples in chunks of ``TRIANGLE_CHUNK`` triangles (``check()`` before
+    each). Every sample depends on its own triangle only, so any chunk sizes give the same
+    samples."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    per_triangle = np.empty(len(faces), dtype=np.int64)
+    for lo in range(0, len(faces), TRIANGLE_CHUNK):
+        if check is not None:
+            check()
+        _, _, count, steps = _triangle_layout(vertices[faces[lo:lo + TRIANGLE_CHUNK]], spacing)
+        per_triangle[lo:lo + TRIANGLE_CHUNK] = count + steps.sum(axis=1)
+    for lo, hi in chunk_runs(per_triangle, SAMPLE_CHUNK, TRIANGLE_CHUNK):
+        if check is not None:
+            check()
+        yield _sample_triangles(vertices[faces[lo:hi]], spacing)
+
+
+def _triangle_layout(triangles, spacing):
+    """Per triangle: unit normal (F, 3), area (F,), interior samples (F,) and samples along
+    each of its edges (F, 3); degenerate triangles get no samples at all."""
+    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    area2 = np.linalg.norm(cross, axis=1)
+    keep = area2 > 1e-12
+    normal = cross / np.where(keep, area2, 1.0)[:, None]
+    area = area2 / 2
+    count = np.where(keep, np.ceil(area / spacing**2), 0).astype(np.int64)
+    length = np.linalg.norm(triangles[:, [1, 2, 0]] - triangles, axis=2)  # (F, 3)
+    steps = np.maximum(np.ceil(length / spacing), 1).astype(np.int64) * keep[:, None]
+    return normal, area, count, steps
+
+
+def _sample_triangles(triangles, spacing):
     """Interior points and normals, boundary points and normals of a chunk of triangles."""
+    normal, _, count, steps = _triangle_layout(triangles, spacing)
     # interior: R2 sequence (golden ratios of the plastic number) in the unit square, folded
     owner, local = _enumerate(count)
     u = (0.5 + local * 0.7548776662466927) % 1.0
     v = (0.5 + local * 0.5698402909980532) % 1.0
     fold = u + v > 1
     u, v = np.where(fold, 1 - u, u), np.where(fold, 1 - v, v)
-    t = tri[owner]
+    t = triangles[owner]
     interior = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
     # boundary: along each edge a -> b, points at a + (i / m) (b - a), i = 0 .. m-1
+    start, end = triangles.reshape(-1, 3), triangles[:, [1, 2, 0]].reshape(-1, 3)
+    steps = steps.reshape(-1)
     edge_owner, edge_local = _enumerate(steps)
-    fraction = (edge_local / steps[edge_owner])[:, None]
+    fraction = (edge_local / np.maximum(steps, 1)[edge_owner])[:, None]
     boundary = start[edge_owner] + fraction * (end - start)[edge_owner]
     return interior, normal[owner], boundary, normal[edge_owner // 3]
 
@@ -212,104 +243,190 @@ def _enumerate(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 #: (row, column) of the 6 stored entries of a symmetric 3x3 quadric
 QUADRIC_ENTRIES = ((0, 0), (1, 1), (2, 2), (0, 1), (1, 2), (2, 0))
+#: the sums over a cell's samples that its QEF and quadric need, with p a sample's position
+#: relative to the cell's min corner and n its unit normal: the count, p (3), n n^T (6, in
+#: ``QUADRIC_ENTRIES`` order), n (n . p) (3)
+CELL_SUMS = 13
+#: every sample adds its terms to the sums rounded to multiples of 1 / SUM_SCALE: sums of such
+#: numbers are exact in float64 (below 2^53, i.e. up to 4M samples in one cell), so the sums, and
+#: the vertices, are the same however the samples are split into chunks or ordered
+SUM_SCALE = 2.0**30
+#: surface cells per chunk of the QEF solve (an eigendecomposition each, ~1 KB of temporaries)
+CELL_CHUNK = 1 << 16
 
 
-def cell_vertices(points, normals, surface, frame_vertices, faces, check=None):
+def cell_vertices(frame_vertices, faces, crossings, surface, check=None):
     """QEF vertex and normal quadric of every surface cell.
 
+    A cell's data are the surface samples that fall inside it (``surface_samples``, spacing
+    1 / ``SAMPLES_PER_CELL``) and the exact crossings of its 12 edges (``lattice_crossings``;
+    each belongs to the 4 cells around its edge), each a point with its triangle's normal.
+    The crossings give every surface cell data, and every plane that crosses a cell's edges a
+    say in its QEF however little of the cell's area it covers: a crease or a corner that
+    only clips a cell is still where that cell's vertex goes.
+
     Args:
-        points, normals: (S, 3) samples in the scale's lattice frame (points at integer corners).
+        frame_vertices, faces: the mesh in the scale's lattice frame (points at integer corners).
+        crossings: the three axes' ``Crossings`` of the same mesh and lattice.
         surface: (D) bool surface cells.
-        frame_vertices, faces: the mesh in the same frame, for cells that got no sample.
-        check: called between the steps and between batches of the sample-less cells'
-            closest-point searches.
+        check: called between the chunks of samples, crossings and cells, and between batches
+            of the closest-point searches of cells that got no data.
 
     Returns:
         vertex: (D, 3) float32 offsets in [0, 1] from each cell's min corner; quadric: (D, 6)
-        float32 mean n n^T of the cell's samples (I / 3 for a cell no sample fell into). Both
-        zero outside ``surface``.
+        float32 mean n n^T of the cell's data (I / 3 for a cell that got none). Both zero
+        outside ``surface``.
     """
-    # each step below is one pass over every sample (12M on a 3.1M-triangle mesh at 128³):
-    # a check between them keeps the waits for Esc and for the progress bar short
-    tick = check if check is not None else (lambda: None)
-    dims = np.array(surface.shape)
-    cell = np.floor(points).astype(np.int64)
-    inside_box = np.all((cell >= 0) & (cell < dims), axis=1)
-    tick()
-    cell, points, normals = cell[inside_box], points[inside_box], normals[inside_box]
-    flat = np.ravel_multi_index(cell.T, surface.shape)
-    del cell
-    tick()
-    on_surface = surface.reshape(-1)[flat]
-    flat, points, normals = flat[on_surface], points[on_surface], normals[on_surface]
-    tick()
-    # compact surface-cell ids so the accumulators are small
     surface_flat = np.flatnonzero(surface)
-    slot = np.searchsorted(surface_flat, flat)
-    corners = np.stack(np.unravel_index(surface_flat, surface.shape), axis=1).astype(np.float64)
-    tick()
-    position = _solve_qef(slot, points, normals, corners)
-    tick()
-    empty = np.isnan(position[:, 0])
-    if np.any(empty):
-        position[empty] = _closest_surface_points(corners[empty] + 0.5, frame_vertices, faces,
-                                                  check)
-    offsets = np.clip(position - corners, 0.0, 1.0)
+    sums = np.zeros((len(surface_flat), CELL_SUMS))
+    for interior, interior_normals, boundary, boundary_normals in sample_chunks(
+            frame_vertices, faces, 1.0 / SAMPLES_PER_CELL, check):
+        for points, normals in ((interior, interior_normals), (boundary, boundary_normals)):
+            _add_to_cells(sums, surface, surface_flat, np.floor(points).astype(np.int64),
+                          points, normals)
+    for cells, points, normals in _crossing_samples(frame_vertices, faces, crossings, check):
+        _add_to_cells(sums, surface, surface_flat, cells, points, normals)
+    sums /= SUM_SCALE
+    corners = np.stack(np.unravel_index(surface_flat, surface.shape), axis=1)
+    offsets = np.empty((len(surface_flat), 3))
+    for lo in range(0, len(surface_flat), CELL_CHUNK):
+        if check is not None:
+            check()
+        offsets[lo:lo + CELL_CHUNK] = _solve_qef(sums[lo:lo + CELL_CHUNK])
+    empty = np.isnan(offsets[:, 0])
+    if np.any(empty):  # a crossing missed by the vote of the three axes' rays: rare
+        offsets[empty] = _closest_surface_points(corners[empty] + 0.5, frame_vertices, faces,
+                                                 check) - corners[empty]
     vertex = np.zeros(surface.shape + (3,), dtype=np.float32)
-    vertex.reshape(-1, 3)[surface_flat] = offsets
-    tick()
-    count = np.bincount(slot, minlength=len(corners)).astype(np.float64)
-    entries = np.stack([np.bincount(slot, normals[:, r] * normals[:, c], len(corners))
-                        for r, c in QUADRIC_ENTRIES], axis=1)
-    entries = np.where(count[:, None] > 0, entries / np.maximum(count, 1)[:, None],
+    vertex.reshape(-1, 3)[surface_flat] = np.clip(offsets, 0.0, 1.0)
+    count = sums[:, :1]
+    entries = np.where(count > 0, sums[:, 4:10] / np.maximum(count, 1),
                        np.array([1, 1, 1, 0, 0, 0]) / 3.0)
     quadric = np.zeros(surface.shape + (6,), dtype=np.float32)
     quadric.reshape(-1, 6)[surface_flat] = entries
     return vertex, quadric
 
 
-def _solve_qef(slot, points, normals, corners) -> np.ndarray:
-    """Per-cell QEF minimiser (n_cells, 3); NaN rows for cells without samples.
+def _crossing_samples(frame_vertices, faces, crossings, check=None):
+    """Yields (cells (N, 3) int, points (N, 3), normals (N, 3)): every edge crossing once for
+    each of the 4 cells around its edge, in chunks of ``SAMPLE_CHUNK`` crossings (``check()``
+    before each). Points are exact surface points (the jittered ray's, ``ray_jitter`` put back);
+    the edge is the one the inside points' parity puts the crossing on."""
+    jitter = ray_jitter()
+    for crossing in crossings:
+        axis = crossing.axis
+        b, c = OTHER_AXES[axis]
+        for lo in range(0, len(crossing.depth), SAMPLE_CHUNK):
+            if check is not None:
+                check()
+            part = slice(lo, lo + SAMPLE_CHUNK)
+            edge = np.empty((len(crossing.depth[part]), 3), dtype=np.int64)
+            edge[:, axis] = np.floor(crossing.depth[part])
+            edge[:, b], edge[:, c] = crossing.column_b[part], crossing.column_c[part]
+            points = edge.astype(np.float64)
+            points[:, axis] = crossing.depth[part]
+            points += jitter
+            triangles = frame_vertices[faces[crossing.triangle[part]]]
+            normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+            normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+            for step_b in (0, 1):
+                for step_c in (0, 1):
+                    cells = edge.copy()
+                    cells[:, b] -= step_b
+                    cells[:, c] -= step_c
+                    yield cells, points, normals
+
+
+def _add_to_cells(sums, surface, surface_flat, cells, points, normals) -> None:
+    """Add each sample's terms (``CELL_SUMS``, times ``SUM_SCALE``, rounded) to the sums of its
+    cell; samples of cells that are not surface cells (or outside the lattice) are dropped."""
+    inside_box = np.all((cells >= 0) & (cells < np.array(surface.shape)), axis=1)
+    cells, points, normals = cells[inside_box], points[inside_box], normals[inside_box]
+    flat = np.ravel_multi_index(cells.T, surface.shape)
+    on_surface = surface.reshape(-1)[flat]
+    local = points[on_surface] - cells[on_surface]
+    normals = normals[on_surface]
+    slot = np.searchsorted(surface_flat, flat[on_surface])
+    along = np.einsum("sd,sd->s", normals, local)  # n . p
+    terms = [None, *local.T, *(normals[:, r] * normals[:, c] for r, c in QUADRIC_ENTRIES),
+             *(normals * along[:, None]).T]
+    for k, term in enumerate(terms):
+        weights = None if term is None else np.round(term * SUM_SCALE)
+        added = np.bincount(slot, weights, minlength=len(surface_flat))
+        sums[:, k] += added * SUM_SCALE if term is None else added
+
+
+def _solve_qef(sums) -> np.ndarray:
+    """(n, 3) QEF minimiser of each cell as an offset from its min corner, inside the cell; NaN
+    rows for cells without data.
+
+    The QEF sum (n . (x - p))^2 is solved about the mass point m of the cell's data with
+    truncated eigenvalues (``tol.qef_singular``: flat and crease cells stay well posed; the
+    dropped directions keep x at m). A solution outside the cell is replaced by the QEF's
+    minimum over the cell (``_minimum_in_cell``): on a crease whose nearest point to m lies in
+    the next cell the vertex slides along the crease into its own cell, and it stays on the
+    planes the data hold wherever the cell allows.
 
     Args:
-        slot: (S,) int cell id of each sample; points, normals: (S, 3);
-        corners: (n_cells, 3) float min corner of each cell.
+        sums: (n, ``CELL_SUMS``) the cells' sums (``cell_vertices``).
     """
-    n_cells = len(corners)
-    count = np.bincount(slot, minlength=n_cells).astype(np.float64)
-    mass = np.stack([np.bincount(slot, points[:, d], n_cells) for d in range(3)], axis=1)
+    count = sums[:, 0]
     has = count > 0
-    mass[has] /= count[has, None]
-    # planes relative to the mass point: minimise sum (n . (x - m) - n . (p - m))^2
-    rel = points - mass[slot]
-    dist = np.einsum("sd,sd->s", normals, rel)
-    ata = np.zeros((n_cells, 3, 3))
-    atb = np.zeros((n_cells, 3))
-    for r in range(3):
-        atb[:, r] = np.bincount(slot, normals[:, r] * dist, n_cells)
-        for c in range(r, 3):
-            ata[:, r, c] = ata[:, c, r] = np.bincount(slot, normals[:, r] * normals[:, c], n_cells)
-    ata += tol.qef_pull * np.trace(ata, axis1=1, axis2=2)[:, None, None] * np.eye(3)
-    eigval, eigvec = np.linalg.eigh(ata)  # ascending eigenvalues
+    mass = sums[:, 1:4] / np.where(has, count, 1.0)[:, None]
+    ata = np.zeros((len(sums), 3, 3))
+    for k, (r, c) in enumerate(QUADRIC_ENTRIES):
+        ata[:, r, c] = ata[:, c, r] = sums[:, 4 + k]
+    # planes relative to the mass point: sum n (n . (p - m)) = sum n (n . p) - (sum n n^T) m
+    atb = sums[:, 10:13] - np.einsum("nij,nj->ni", ata, mass)
+    pull = tol.qef_pull * np.trace(ata, axis1=1, axis2=2)
+    eigval, eigvec = np.linalg.eigh(ata + pull[:, None, None] * np.eye(3))  # ascending
     keep = eigval > tol.qef_singular * eigval[:, 2:3]
     inverse = np.where(keep, 1.0 / np.where(keep, eigval, 1.0), 0.0)
-    projected = np.einsum("ndk,nd->nk", eigvec, atb) * inverse
-    position = mass + np.einsum("ndk,nk->nd", eigvec, projected)
-    position = _pull_into_cells(position, mass, corners)
+    step = np.einsum("ndk,nk->nd", eigvec, np.einsum("ndk,nd->nk", eigvec, atb) * inverse)
+    position = mass + step
+    outside = has & np.any((position < -tol.cell_slack) | (position > 1 + tol.cell_slack), axis=1)
+    if np.any(outside):
+        # the dropped directions cost only the pull towards the mass point
+        weight = np.where(keep, eigval, pull[:, None])[outside]
+        hessian = np.einsum("nij,nj,nkj->nik", eigvec[outside], weight, eigvec[outside])
+        position[outside] = _minimum_in_cell(hessian, position[outside])
     position[~has] = np.nan
     return position
 
 
-def _pull_into_cells(position, mass, corner) -> np.ndarray:
-    """Move each position along the segment from its mass point until it lies in its cell."""
-    lo, hi = corner - tol.cell_slack, corner + 1 + tol.cell_slack
-    step = position - mass
-    with np.errstate(divide="ignore", invalid="ignore"):
-        limit_hi = np.where(step > 0, (hi - mass) / step, np.inf)
-        limit_lo = np.where(step < 0, (lo - mass) / step, np.inf)
-    t = np.clip(np.minimum(limit_hi, limit_lo).min(axis=1), 0.0, 1.0)
-    t = np.nan_to_num(t, nan=0.0)
-    return mass + step * t[:, None]
+#: the interior, faces, edges and corners of a cell, where the minimum of a quadratic over the
+#: cell can lie: per axis, free (-1) or held at the cell's low (0) or high (1) side
+CELL_PARTS = tuple(itertools.product((-1, 0, 1), repeat=3))
+
+
+def _minimum_in_cell(hessian, target) -> np.ndarray:
+    """(n, 3) the point of the unit cell [0, 1]^3 that minimises (x - t)^T H (x - t), for
+    positive definite H (n, 3, 3) and targets t (n, 3).
+
+    The minimum of a strictly convex quadratic over a box lies inside exactly one of the box's
+    parts (its interior, a face, an edge or a corner), where it is the quadratic's minimum over
+    that part's affine hull (space, plane, line, point); so it is the lowest of the 27 such
+    minima that lie in the cell.
+    """
+    best_cost = np.full(len(target), np.inf)
+    best = np.clip(target, 0.0, 1.0)  # replaced below: some part always holds the minimum
+    for pattern in CELL_PARTS:
+        held = [axis for axis in range(3) if pattern[axis] >= 0]
+        free = [axis for axis in range(3) if pattern[axis] < 0]
+        point = target.copy()
+        point[:, held] = [pattern[axis] for axis in held]
+        if free:
+            # on the plane x_held = bounds: H_ff (x_f - t_f) = -H_fh (x_h - t_h)
+            shift = np.einsum("nij,nj->ni", hessian[:, free][:, :, held],
+                              point[:, held] - target[:, held])
+            point[:, free] -= np.linalg.solve(hessian[:, free][:, :, free],
+                                              shift[..., None])[..., 0]
+        inside = np.all((point >= -tol.cell_slack) & (point <= 1 + tol.cell_slack), axis=1)
+        delta = point - target
+        cost = np.einsum("ni,nij,nj->n", delta, hessian, delta)
+        better = inside & (cost < best_cost)
+        best_cost[better], best[better] = cost[better], point[better]
+    return best
 
 
 #: cells around a query cell whose triangles may hold its closest point: the query is a

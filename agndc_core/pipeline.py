@@ -55,7 +55,11 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     METHODS,
 )
 from .options import RemeshOptions
-from .progress import Stages, subrange  # noqa: F401  (subrange: part of this module's API)
+from .progress import (  # noqa: F401  (subrange: part of this module's API)
+    Stages,
+    raise_if_cancelled,
+    subrange,
+)
 
 #: largest simplify tolerance (voxels) a target face count may use: beyond about a voxel the
 #: count rises again, then falls only as voxel-sized features vanish (``decimate.py``)
@@ -331,7 +335,9 @@ def remesh_mesh(vertices, faces, options: RemeshOptions | None = None, *, source
     from .voxelize import voxelize
 
     opts = RemeshOptions.of(options, **changes)
-    expected = _expected_mesh_stages(vertices, faces, opts) if progress is not None else None
+    # the expected times read every triangle of a dense mesh: Esc is honoured in between
+    expected = (_expected_mesh_stages(vertices, faces, opts, lambda: raise_if_cancelled(cancel))
+                if progress is not None else None)
     stages = Stages(progress, cancel, expected)
     grid = stages.run("voxelise", voxelize, vertices, faces, opts.resolution, shift=shift,
                       source=source, check=stages.check)
@@ -352,10 +358,11 @@ def remesh_mesh(vertices, faces, options: RemeshOptions | None = None, *, source
     return result
 
 
-def _expected_mesh_stages(vertices, faces, options: RemeshOptions) -> dict | None:
+def _expected_mesh_stages(vertices, faces, options: RemeshOptions, check=None) -> dict | None:
     """{stage: expected seconds} of ``remesh_mesh``: voxelising and (mesh-only methods) the
     exact intersections grow with the triangles, the remesh of the grid with its size; None
-    for a mesh ``voxelize`` will refuse (it says why)."""
+    for a mesh ``voxelize`` will refuse (it says why). ``check()`` runs between chunks of the
+    triangles (``plan.mesh_crossings``)."""
     from .plan import mesh_crossings
     from .voxelize import grid_layout
 
@@ -367,7 +374,7 @@ def _expected_mesh_stages(vertices, faces, options: RemeshOptions) -> dict | Non
         return None
     voxel, counts = grid_layout(extent, options.resolution)
     return expected_mesh_stages(options, triangles=len(faces), points=lattice_points(counts),
-                                crossings=mesh_crossings(vertices, faces, voxel))
+                                crossings=mesh_crossings(vertices, faces, voxel, check))
 
 
 def expected_mesh_stages(options: RemeshOptions, *, triangles: int, crossings: float,

@@ -55,6 +55,12 @@ def interpolated_share(elapsed: float, expected: float) -> float:
     return 1.0 - rest / (1.0 + (ratio - LINEAR_SHARE) / rest)
 
 
+def raise_if_cancelled(cancel) -> None:
+    """Raise CancelledError once ``cancel`` (an object with ``is_set()``, or None) is set."""
+    if cancel is not None and cancel.is_set():
+        raise CancelledError("remesh cancelled")
+
+
 class Stages:
     """Times named stages, reports progress and honours cancellation between and inside them.
 
@@ -99,8 +105,7 @@ class Stages:
     def check(self) -> None:
         """Raise CancelledError once the run is cancelled; inside a stage, also report its
         progress (at most every ``PROGRESS_INTERVAL``). Long stages call this between chunks."""
-        if self.cancel is not None and self.cancel.is_set():
-            raise CancelledError("remesh cancelled")
+        raise_if_cancelled(self.cancel)
         if self.progress is None or self._stage is None:
             return
         now = time.perf_counter()

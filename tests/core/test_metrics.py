@@ -218,13 +218,19 @@ def test_format_row_and_summarize():
 
 
 @pytest.mark.parametrize("offset", [0.0, 0.02])
-def test_chamfer_distance_alone_is_evaluates_cd_and_checks_between_steps(cube, sphere, offset):
+def test_chamfer_distance_alone_is_evaluates_cd_and_checks_between_steps(monkeypatch, cube,
+                                                                         sphere, offset):
+    """The same CD as ``evaluate``, with checks between the steps and between the chunks of
+    triangles of the sampling (any chunk size gives the same samples)."""
     pred = trimesh.Trimesh(sphere.vertices * 0.9 + [offset, 0, 0], sphere.faces)
+    full = M.evaluate(pred.vertices, pred.faces, cube.vertices, cube.faces, n_samples=N_FAST,
+                      seed=3)
+    monkeypatch.setattr(M, "TRIANGLE_CHUNK", 100)
     calls = []
     cd = M.chamfer_distance(pred.vertices, pred.faces, cube.vertices, cube.faces,
                             n_samples=N_FAST, seed=3, check=lambda: calls.append(1))
-    full = M.evaluate(pred.vertices, pred.faces, cube.vertices, cube.faces, n_samples=N_FAST,
-                      seed=3)
-    assert cd == full["cd"] > 0 and len(calls) == 3
+    # the cube's one chunk, the sphere's area test (its first chunk) and chunks, two steps
+    assert cd == full["cd"] > 0
+    assert len(calls) == 1 + 1 + -(-len(sphere.faces) // 100) + 2
     assert M.chamfer_distance(np.eye(3), np.zeros((0, 3), int), cube.vertices, cube.faces,
                               n_samples=N_FAST) == math.inf

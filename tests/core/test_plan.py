@@ -79,6 +79,38 @@ def test_crossings_estimate_counts_crossed_edges():
         assert abs(estimated / counted - 1) < 0.1
 
 
+def test_crossings_estimate_in_chunks_checks_between_them(monkeypatch):
+    """A run's expected times read every triangle before its first stage: in chunks, with a
+    check before each, and the same estimate whatever the chunk size."""
+    from agndc_core.errors import CancelledError
+    from agndc_core.pipeline import remesh_mesh
+
+    vertices, faces = cad_part(7)
+    whole = plan.mesh_crossings(vertices, faces, 0.02)
+    monkeypatch.setattr(plan, "TRIANGLE_CHUNK", 100)
+    calls = []
+    assert plan.mesh_crossings(vertices, faces, 0.02, check=lambda: calls.append(1)) == whole
+    assert len(calls) == -(-len(faces) // 100)
+
+    class CancelInside:
+        def is_set(self):
+            return "mesh_crossings" in {frame.f_code.co_name for frame in _frames()}
+
+    with pytest.raises(CancelledError):
+        remesh_mesh(vertices, faces, resolution=24, method="mc", cancel=CancelInside(),
+                    progress=lambda fraction, message: None)
+
+
+def _frames():
+    """The calling frames, innermost first."""
+    import sys
+
+    frame = sys._getframe(1)
+    while frame is not None:
+        yield frame
+        frame = frame.f_back
+
+
 def test_estimate_grows_with_the_grid():
     small = plan.estimate_seconds("agndc", (64, 64, 64), 30_000)
     large = plan.estimate_seconds("agndc", (128, 128, 128), 120_000)

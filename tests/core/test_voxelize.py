@@ -80,13 +80,16 @@ def test_matches_trimesh_contains_on_a_small_grid():
 
 @pytest.mark.parametrize("rule", ["winding", "parity"])
 def test_ray_casting_in_chunks_gives_the_same_grid_and_checks_between_them(monkeypatch, rule):
-    """The candidate (triangle, column) pairs are cast in chunks, with ``check`` called before
-    each: any chunk size gives the same occupancy, and a check that raises stops the work."""
+    """The winding test's edges, the triangles' column ranges and the candidate (triangle,
+    column) pairs go in chunks, with ``check`` called before each: any chunk sizes give the
+    same occupancy, and a check that raises stops the work."""
     from agndc_core import voxelize as module
 
     mesh = cylinder_with_hole()
     whole = voxelize(mesh.vertices, mesh.faces, 48, rule=rule).occupancy
     monkeypatch.setattr(module, "PAIR_CHUNK", 257)
+    monkeypatch.setattr(module, "TRIANGLE_CHUNK", 100)
+    monkeypatch.setattr(module, "EDGE_CHUNK", 300)
     calls = []
     chunked = voxelize(mesh.vertices, mesh.faces, 48, rule=rule,
                        check=lambda: calls.append(1)).occupancy
@@ -98,3 +101,21 @@ def test_ray_casting_in_chunks_gives_the_same_grid_and_checks_between_them(monke
 
     with pytest.raises(KeyboardInterrupt):
         voxelize(mesh.vertices, mesh.faces, 48, check=cancel)
+
+
+@pytest.mark.parametrize("edge_chunk", [1 << 21, 300])
+def test_winding_rule_test_in_groups_of_edges(monkeypatch, edge_chunk):
+    """The winding rule is for closed, consistently oriented meshes: the test runs over groups of
+    edges that share their lower vertex (a check between them) and sees a hole, a flipped face
+    and a repeated face whatever the group size."""
+    from agndc_core import voxelize as module
+
+    monkeypatch.setattr(module, "EDGE_CHUNK", edge_chunk)
+    faces = np.asarray(cylinder_with_hole().faces, dtype=np.int64)
+    flipped = faces.copy()
+    flipped[7] = flipped[7, ::-1]
+    calls = []
+    assert module._choose_rule(faces, "auto", check=lambda: calls.append(1)) == "winding"
+    assert len(calls) > (10 if edge_chunk == 300 else 1)
+    for broken in (faces[1:], flipped, np.concatenate([faces, faces[:1]])):
+        assert module._choose_rule(broken, "auto") == "parity"
