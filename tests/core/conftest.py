@@ -32,6 +32,16 @@ def randomise_outputs(net, std=0.1, seed=1):
     return net
 
 
+def research_script(name: str):
+    """A script of ``research/`` (not a package) imported as a module, for its tests."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO / "research" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def rotation(angle, axis):
     return trimesh.transformations.rotation_matrix(angle, axis)
 

@@ -2,8 +2,6 @@
 along the normal of exactly axis-aligned faces (the converse, the truth there and the network
 elsewhere), and its error scale interpolates between the two."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 
@@ -12,16 +10,11 @@ from agndc_core.labels import make_labels
 from agndc_core.surfacenets import surface_nets_lattice
 from agndc_core.tolerances import tol
 from agndc_core.voxelize import voxelize
-from conftest import box, rotation
-
-SCRIPT = Path(__file__).resolve().parents[2] / "research" / "headroom_bound.py"
+from conftest import box, research_script, rotation
 
 
 def _script():
-    spec = importlib.util.spec_from_file_location("headroom_bound", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return research_script("headroom_bound")
 
 
 def _variants(mesh, network_of):

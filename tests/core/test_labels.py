@@ -1,7 +1,5 @@
 """Ground-truth labels and the oracle: contouring exact labels must reproduce the shape."""
 
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,7 +10,7 @@ from agndc_core.labels import make_labels
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh_mesh
 from agndc_core.voxelize import voxelize
-from conftest import box, cylinder_with_hole, edge_use_counts, rotation, sphere
+from conftest import box, cylinder_with_hole, edge_use_counts, research_script, rotation, sphere
 
 RES = 32
 SHAPES = {
@@ -236,15 +234,9 @@ def test_closest_points_in_batches_are_the_same(monkeypatch):
     assert len(calls) == 8
 
 
-SPIKES_SCRIPT = Path(__file__).resolve().parents[2] / "research" / "sharp_spikes.py"
-
-
 def _spikes_script():
     """research/sharp_spikes.py: the turned-face measure and the junction part."""
-    spec = importlib.util.spec_from_file_location("sharp_spikes", SPIKES_SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return research_script("sharp_spikes")
 
 
 def washer_turned_off_grid() -> trimesh.Trimesh:

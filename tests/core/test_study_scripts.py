@@ -4,6 +4,8 @@ agndc command that records how it was called."""
 import subprocess
 from pathlib import Path
 
+from conftest import research_script
+
 REPO = Path(__file__).resolve().parents[2]
 
 # writes its arguments and an empty rows.csv where `-o` points, as `agndc eval` would
@@ -49,13 +51,7 @@ def test_score_evaluates_every_step_once_and_a_tag_forwards_its_options(tmp_path
 
 
 def _table_script():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("learning_curve_table",
-                                                  REPO / "research" / "learning_curve_table.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return research_script("learning_curve_table")
 
 
 def test_a_continued_run_counts_its_steps_on_from_the_checkpoint_it_started_from(tmp_path):
