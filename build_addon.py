@@ -217,6 +217,8 @@ def stage_sources(stage: Path) -> Path:
     if stage.exists():
         shutil.rmtree(stage)
     shutil.copytree(ROOT / "agndc_blender", stage, ignore=EXCLUDE_PATTERNS)
+    # the Help button's guide, readable offline (agndc_blender/operators.py USER_GUIDES)
+    shutil.copy2(ROOT / "docs" / "blender.md", stage / "user_guide.md")
     for name in PRODUCT_MODULES:
         source, dest = ROOT / "agndc_core" / name, stage / "agndc_core" / name
         dest.parent.mkdir(parents=True, exist_ok=True)

@@ -24,6 +24,7 @@ classes = (
     properties.AGNDC_RemeshSettings,
     operators.OBJECT_OT_agndc_remesh,
     operators.IMPORT_MESH_OT_agndc_grid,
+    operators.WM_OT_agndc_user_guide,
     operators.AGNDC_FH_voxel_grid,
     panels.VIEW3D_PT_agndc_remesh,
 )

@@ -15,6 +15,7 @@ import os
 import threading
 import time
 import traceback
+from pathlib import Path
 
 import bpy
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, IntProperty, StringProperty
@@ -461,6 +462,59 @@ class IMPORT_MESH_OT_agndc_grid(_RemeshOperatorMixin, bpy.types.Operator, Import
 
     def draw(self, context):
         draw_settings(self.layout, self, mesh=False)
+
+
+#: the user guide inside the built extension (``build_addon.py`` copies docs/blender.md there),
+#: or the one of a checkout
+USER_GUIDES = (Path(__file__).parent / "user_guide.md",
+               Path(__file__).parents[1] / "docs" / "blender.md")
+#: the Text datablock the guide is read into
+USER_GUIDE_TEXT = "AGNDC Remesher guide"
+
+
+def user_guide_path() -> Path | None:
+    return next((path for path in USER_GUIDES if path.is_file()), None)
+
+
+class WM_OT_agndc_user_guide(bpy.types.Operator):
+    """Open the AGNDC Remesher user guide (shipped with the extension, readable offline) in a
+    Text Editor window"""
+
+    bl_idname = "wm.agndc_user_guide"
+    bl_label = "User Guide"
+    bl_options = {"REGISTER"}
+
+    def execute(self, context):
+        path = user_guide_path()
+        if path is None:
+            self.report({"ERROR"}, "The user guide is missing from this installation")
+            return {"CANCELLED"}
+        text = bpy.data.texts.get(USER_GUIDE_TEXT)
+        if text is None:
+            text = bpy.data.texts.new(USER_GUIDE_TEXT)
+            text.from_string(path.read_text(encoding="utf-8"))
+            text.use_fake_user = False
+        if not bpy.app.background and _show_text_in_new_window(context, text):
+            return {"FINISHED"}
+        self.report({"INFO"}, f"The user guide is in the Text Editor as '{text.name}'")
+        return {"FINISHED"}
+
+
+def _show_text_in_new_window(context, text) -> bool:
+    """A new window whose one area is a Text Editor showing ``text``; False if no window
+    could be opened (then the guide stays available as a Text datablock)."""
+    windows = set(context.window_manager.windows)
+    try:
+        bpy.ops.wm.window_new()
+    except RuntimeError:
+        return False
+    new = [window for window in context.window_manager.windows if window not in windows]
+    if not new:
+        return False
+    area = new[0].screen.areas[0]
+    area.type = "TEXT_EDITOR"
+    area.spaces.active.text = text
+    return True
 
 
 class AGNDC_FH_voxel_grid(bpy.types.FileHandler):

@@ -13,6 +13,7 @@ from .operators import (
     RUN,
     IMPORT_MESH_OT_agndc_grid,
     OBJECT_OT_agndc_remesh,
+    WM_OT_agndc_user_guide,
     draw_settings,
     format_seconds,
 )
@@ -47,15 +48,17 @@ class VIEW3D_PT_agndc_remesh(bpy.types.Panel):
         col.operator(OBJECT_OT_agndc_remesh.bl_idname, icon="MOD_REMESH")
         col.operator(IMPORT_MESH_OT_agndc_grid.bl_idname, text="Import Voxel Grid...",
                      icon="IMPORT")
+        row = layout.row(align=True)
+        row.operator(WM_OT_agndc_user_guide.bl_idname, icon="HELP")
         url = help_url()
         if url:
-            layout.operator("wm.url_open", text="Help", icon="HELP").url = url
+            row.operator("wm.url_open", text="Website", icon="URL").url = url
 
 
 @lru_cache(maxsize=1)
 def help_url() -> str:
     """The manifest's ``website`` (the one place the documentation URL is written), or "" (then
-    the panel shows no Help button)."""
+    the panel shows the shipped user guide only)."""
     import tomllib
 
     for path in MANIFESTS:

@@ -312,6 +312,22 @@ def test_help_button_opens_the_manifest_website(addon):
         panels.help_url = original
 
 
+def test_help_opens_the_shipped_user_guide(addon):
+    """Without a website the Help button still helps: the guide travels inside the extension
+    and opens offline (background mode has no window, so it is read into a Text datablock)."""
+    panels = importlib.import_module(f"{addon.module}.panels")
+    operators = importlib.import_module(f"{addon.module}.operators")
+    log = []
+    panels.VIEW3D_PT_agndc_remesh.draw(SimpleNamespace(layout=RecordingLayout(log)), bpy.context)
+    assert ("operator", "wm.agndc_user_guide") in log
+    assert operators.user_guide_path().parent.name == addon.module.rsplit(".", 1)[-1]
+    assert bpy.ops.wm.agndc_user_guide() == {"FINISHED"}
+    guide = bpy.data.texts[operators.USER_GUIDE_TEXT].as_string()
+    assert guide.startswith("# AGNDC Remesher in Blender") and "Remesh with AGNDC" in guide
+    assert bpy.ops.wm.agndc_user_guide() == {"FINISHED"}  # a second press reuses it
+    assert len([t for t in bpy.data.texts if t.name.startswith(operators.USER_GUIDE_TEXT)]) == 1
+
+
 def test_drag_and_drop_handler(addon):
     handler = bpy.types.AGNDC_FH_voxel_grid
     assert handler.bl_import_operator == "import_mesh.agndc_grid"
