@@ -62,6 +62,11 @@ def parse_args(argv):
     parser.add_argument("--checkpoint", help="custom weights (.safetensors)")
     parser.add_argument("--no-distance", action="store_true",
                         help="skip the Chamfer distance of each result to its source mesh")
+    parser.add_argument("--per-label", action="store_true",
+                        help="label maps (.nii .nii.gz .npy .npz): one output per label, named "
+                        "<input>_label-<value> (docs/labelmaps.md)")
+    parser.add_argument("--labels", default="",
+                        help="with --per-label: only these labels, e.g. 1,3,7")
     return parser.parse_args(argv)
 
 
@@ -90,9 +95,15 @@ def list_inputs(path: Path, batch) -> list[Path]:
     return batch.find_files(path, recursive=False) if path.is_dir() else [path]
 
 
-def output_path(args, source: Path, stem: str, method: str, single: bool, suffixes) -> Path:
+def output_path(args, source: Path, stem: str, method: str, single: bool, suffixes,
+                several: bool = False) -> Path:
+    """Where one result is written; ``several``: the input gave several results of a method
+    (the labels of a label map, the models of a .vox), named by their own ``stem`` even when
+    ``--output`` names a file."""
     if single and args.output.suffix and not args.output.is_dir():
         first = args.output
+        if several:
+            first = first.with_name(f"{stem}{first.suffix}")
         return first if method == args.method else first.with_name(
             f"{first.stem}_{suffixes[method]}{first.suffix}")
     return args.output / f"{stem}_{suffixes[method]}{args.format}"
@@ -103,28 +114,39 @@ def process(path: Path, args, addon, settings, single: bool) -> list[dict]:
     remesh, core, mesh_io = addon.remesh, addon.core, addon.mesh_io
     start = time.perf_counter()
     if core.gridio.is_grid_path(path):
-        report = remesh.import_grid(path, settings)
+        # one job per label of a label map (--per-label), else one for the file
+        jobs = remesh.grid_jobs([path], settings)
+        remesh.compute_jobs(jobs, settings)
+        reports = remesh.apply_jobs(jobs, settings)
     else:
         vertices, faces = core.gridio.load_mesh(path)
         name = path.name.rsplit(".", 1)[0]
         obj = bpy.data.objects.new(name, mesh_io.new_mesh(name, vertices, faces))
         bpy.context.scene.collection.objects.link(obj)
         try:
-            report = remesh.remesh_object(obj, settings)
+            reports = [remesh.remesh_object(obj, settings)]
         finally:
             _remove(obj)
+    if len(reports) == 1 and reports[0].error is not None:
+        raise core.errors.AGNDCError(reports[0].error)
     rows = []
-    for item in report.made:
-        vertices, faces = mesh_io.mesh_arrays(item.object.data)
-        out = output_path(args, path, report.source, item.method, single, remesh.SUFFIXES)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        core.gridio.save_mesh(vertices, faces, out)
-        rows.append(dict(input=str(path), output=str(out), method=item.method, status="ok",
-                         faces=len(faces), vertices=len(vertices),
-                         seconds=f"{time.perf_counter() - start:.3f}",
-                         remesh_seconds=f"{item.seconds:.3f}",
-                         cd="" if item.cd is None else f"{item.cd:.6g}", error=""))
-        _remove(item.object)
+    for report in reports:
+        if report.error is not None:  # one label of several failed: the others still count
+            rows.append(dict(input=str(path), output=report.source, status="failed",
+                             error=report.error))
+            continue
+        for item in report.made:
+            vertices, faces = mesh_io.mesh_arrays(item.object.data)
+            out = output_path(args, path, report.source, item.method, single, remesh.SUFFIXES,
+                              several=len(reports) > 1)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            core.gridio.save_mesh(vertices, faces, out)
+            rows.append(dict(input=str(path), output=str(out), method=item.method, status="ok",
+                             faces=len(faces), vertices=len(vertices),
+                             seconds=f"{time.perf_counter() - start:.3f}",
+                             remesh_seconds=f"{item.seconds:.3f}",
+                             cd="" if item.cd is None else f"{item.cd:.6g}", error=""))
+            _remove(item.object)
     return rows
 
 
@@ -151,7 +173,8 @@ def main(argv) -> int:
                                distance=not args.no_distance,
                                normal_filter=not args.no_normal_filter,
                                decimate_error=args.decimate_error,
-                               target_faces=args.target_faces)
+                               target_faces=args.target_faces,
+                               per_label=args.per_label, labels=args.labels)
     if not args.input.exists():
         print(f"agndc_batch: error: {args.input}: no such file or folder", file=sys.stderr)
         return 2
@@ -180,12 +203,17 @@ def main(argv) -> int:
                 traceback.print_exc()
                 table.write(dict(input=str(path), status="failed", error=repr(exc)))
                 continue
+            failures += any(row["status"] == "failed" for row in new_rows)
             for row in new_rows:
                 table.write(row)
+                if row["status"] == "failed":
+                    print(f"FAILED {row['output']}: {row['error']}", file=sys.stderr)
+                    continue
                 print(f"{row['output']}: {row['faces']} faces, {row['remesh_seconds']} s"
                       + (f", CD {float(row['cd']) * 1e5:.2f}e-5" if row["cd"] else ""))
     finally:
         table.close()
+    # an input with a failed label counts as failed (its other labels are still written)
     print(f"{len(inputs) - failures}/{len(inputs)} inputs done, {failures} failed; "
           f"table: {csv_dir / CSV_NAME}")
     return 1 if failures else 0

@@ -92,3 +92,33 @@ def test_batch_single_file_and_bad_arguments(inputs, tmp_path):
     missing = _batch("--input", tmp_path / "nope", "--output", tmp_path / "o",
                      tmp_path=tmp_path)
     assert missing.returncode == 2 and "no such file" in missing.stderr
+
+
+def test_batch_label_maps_per_label(tmp_path):
+    """--per-label: one output per label of each label map, named <input>_label-<value>;
+    --labels picks some; a label asked for that a file lacks fails that file, as in the
+    add-on's Per Label import, with a message naming the labels it holds."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    volume = np.zeros((24, 20, 16), dtype=np.uint8)
+    volume[3:10, 3:16, 3:12] = 1
+    volume[12:20, 4:14, 2:13] = 2
+    volume[4:9, 4:9, 13:15] = 5
+    np.save(folder / "seg.npy", volume)
+    out = tmp_path / "out"
+    result = _batch("--input", folder, "--output", out, "--method", "mc", "--per-label",
+                    "--no-distance", tmp_path=tmp_path)
+    assert result.returncode == 0, result.stderr + result.stdout
+    assert sorted(p.name for p in out.glob("*.obj")) == [
+        "seg_label-1_MC.obj", "seg_label-2_MC.obj", "seg_label-5_MC.obj"]
+    assert all(r["status"] == "ok" for r in _rows(out))
+    subset = _batch("--input", folder, "--output", tmp_path / "subset", "--method", "mc",
+                    "--per-label", "--labels", "5,2", "--no-distance", tmp_path=tmp_path)
+    assert subset.returncode == 0, subset.stderr
+    assert sorted(p.name for p in (tmp_path / "subset").glob("*.obj")) == [
+        "seg_label-2_MC.obj", "seg_label-5_MC.obj"]
+    missing = _batch("--input", folder, "--output", tmp_path / "missing", "--method", "mc",
+                     "--per-label", "--labels", "2,7", "--no-distance", tmp_path=tmp_path)
+    assert missing.returncode == 1
+    (row,) = _rows(tmp_path / "missing")
+    assert row["status"] == "failed" and "7" in row["error"]
