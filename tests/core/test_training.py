@@ -261,10 +261,12 @@ def test_quadric_floor_reaches_every_scale_loss(data_dir, tmp_path):
 def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_path):
     """An untrained network *is* surface nets (zero vertex heads + prior); a short run must do
     clearly better than that on batches it never saw. The single-scale plain-conv network
-    (UNDC) learns fastest per second, so it keeps this test short."""
+    (UNDC) learns fastest per second, so it keeps this test short. (400 steps: on the labels
+    with exact edge crossings 200 steps reached 0.88 of the surface nets loss, where the
+    sample-only labels reached 0.75; 400 reach 0.68.)"""
     from agndc_core.checkpoint import load_checkpoint
 
-    cfg = _config(data_dir, tmp_path / "run", steps=(200,))
+    cfg = _config(data_dir, tmp_path / "run", steps=(400,))
     cfg.model = dict(width=8, levels=0, use_attention=False, use_snake=False, use_dffm=False,
                      use_crpm=False)
     trainer = Trainer(cfg)
@@ -272,7 +274,7 @@ def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_
     path = trainer.run(progress=False)
     assert _held_out_loss(trainer) < 0.85 * before
     model, meta = load_checkpoint(path)
-    assert meta["training"]["steps_per_scale"] == [200]
+    assert meta["training"]["steps_per_scale"] == [400]
     assert meta["training"]["data"]["samples"] == 3
     assert meta["training"]["hardware"].startswith("CPU, ")  # what the step times were on
     # the wait for batches is part of the step time, never more
