@@ -493,7 +493,6 @@ class WM_OT_agndc_user_guide(bpy.types.Operator):
         if text is None:
             text = bpy.data.texts.new(USER_GUIDE_TEXT)
             text.from_string(path.read_text(encoding="utf-8"))
-            text.use_fake_user = False
         if not bpy.app.background and _show_text_in_new_window(context, text):
             return {"FINISHED"}
         self.report({"INFO"}, f"The user guide is in the Text Editor as '{text.name}'")

@@ -389,7 +389,7 @@ def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
     spans = _layer_spans(cells[2], surface, n_surfaces)
     plane = _fit_planes(u, v, h, surface, n_surfaces)  # (K, 3): h = p u + q v + r
     plane = _into_layers(u, v, cells[2], plane, surface, n_surfaces, spans)
-    fitted = plane[surface, 0] * u + plane[surface, 1] * v + plane[surface, 2]
+    fitted = _plane_heights(plane, surface, u, v)
     local = fitted - cells[2]  # the plane's coordinate inside each cell's layer
     outside = (local < -tol.terrace_slack) | (local > 1 + tol.terrace_slack)
     residual = np.bincount(surface, (h - fitted) ** 2, n_surfaces)
@@ -452,6 +452,11 @@ def _fit_planes(u, v, h, group, n_groups: int) -> np.ndarray:
     return np.stack([slope[:, 0], slope[:, 1], mh - slope[:, 0] * mu - slope[:, 1] * mv], -1)
 
 
+def _plane_heights(plane, group, u, v) -> np.ndarray:
+    """(S,) height of each point's group plane h = p u + q v + r at (u, v)."""
+    return plane[group, 0] * u + plane[group, 1] * v + plane[group, 2]
+
+
 def _into_layers(u, v, layer, plane, group, n_groups: int, spans) -> np.ndarray:
     """(n_groups, 3) the planes, where one leaves some of its cells' layers by more than
     ``tol.terrace_slack`` and its surface covers 3 layers or more, moved towards a plane that
@@ -467,7 +472,7 @@ def _into_layers(u, v, layer, plane, group, n_groups: int, spans) -> np.ndarray:
     a fraction of a voxel between two flat faces. A plane that passed already, and a curved
     surface no plane fits, keep the least-squares plane."""
     def departure(planes) -> np.ndarray:  # (n_groups,) how far each leaves its layers, voxels
-        fitted = planes[group, 0] * u + planes[group, 1] * v + planes[group, 2]
+        fitted = _plane_heights(planes, group, u, v)
         gap = np.maximum(layer - fitted, fitted - (layer + 1))
         out = np.zeros(n_groups)
         np.maximum.at(out, group, gap)
@@ -480,7 +485,7 @@ def _into_layers(u, v, layer, plane, group, n_groups: int, spans) -> np.ndarray:
     for _ in range(tol.terrace_projections):
         if not active.any():
             break
-        fitted = moved[group, 0] * u + moved[group, 1] * v + moved[group, 2]
+        fitted = _plane_heights(moved, group, u, v)
         refit = _fit_planes(u, v, np.clip(fitted, layer, layer + 1), group, n_groups)
         moved = np.where(active[:, None], refit, moved)
         active &= departure(moved) > tol.terrace_slack / 3
@@ -582,9 +587,9 @@ def _into_layers_naive(u, v, layer, fitted) -> np.ndarray:
     if departure(fitted) <= tol.terrace_slack or layer.max() - layer.min() + 1 < 3:
         return fitted
     moved = fitted
+    design = np.stack([u - u.mean(), v - v.mean(), np.ones_like(u)], -1)
     for _ in range(tol.terrace_projections):
         clipped = np.clip(moved, layer, layer + 1)
-        design = np.stack([u - u.mean(), v - v.mean(), np.ones_like(u)], -1)
         moved = design @ np.linalg.lstsq(design, clipped, rcond=None)[0]
         if departure(moved) <= tol.terrace_slack / 3:
             break

@@ -248,15 +248,15 @@ def unfold_components(vertices, faces, lattice, edge, min_component_faces: int =
     """Components the network turned inside out take their surface nets vertices
     (``contour.restore_folded_components``). The same lattice and edges give the same vertices
     in the same order (only the quads' diagonals follow the positions), so the surface nets
-    vertices are compared on the network's own faces. ``check()`` runs between the steps."""
+    vertices are compared on the network's own faces. ``check()`` runs between the two steps."""
     from .contour import restore_folded_components
     from .surfacenets import surface_nets_cells
 
-    tick = check if check is not None else (lambda: None)
     reference, reference_faces = dual_contour(lambda cells: surface_nets_cells(lattice, cells),
                                               edge, lattice,
                                               min_component_faces=min_component_faces)
-    tick()
+    if check is not None:
+        check()
     if reference.shape != vertices.shape or reference_faces.shape != faces.shape:
         return vertices  # not the same surfaces (cannot happen for one lattice): leave them
     return restore_folded_components(vertices, faces, reference)[0]

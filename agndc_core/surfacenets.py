@@ -73,22 +73,6 @@ def surface_nets_cells(lattice: np.ndarray, cells: np.ndarray) -> np.ndarray:
                     np.float32(CENTRE)).astype(np.float32)
 
 
-def surface_cells(lattice: np.ndarray) -> np.ndarray:
-    """(C,) flat ids (into the lattice's shape) of the cells with a crossed edge, in C order:
-    those whose 8 corners are not all inside or all outside, the only cells whose surface nets
-    offset is not ``CENTRE``."""
-    g = np.asarray(lattice, dtype=bool)
-    n = [max(d - 1, 0) for d in g.shape]
-    corners = [g[i:i + n[0], j:j + n[1], k:k + n[2]]
-               for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-    any_inside, all_inside = corners[0].copy(), corners[0].copy()
-    for corner in corners[1:]:
-        any_inside |= corner
-        all_inside &= corner
-    cells = np.nonzero(any_inside & ~all_inside)
-    return np.ravel_multi_index(cells, g.shape)
-
-
 def surface_nets_offsets_naive(lattice: np.ndarray) -> np.ndarray:
     """Cell-by-cell reference of ``surface_nets_lattice`` for one (X, Y, Z) lattice (slow)."""
     lattice = np.asarray(lattice, dtype=bool)

@@ -319,11 +319,12 @@ class Network:
         """P_0 (X, Y, Z, 6) + the surface nets prior's delta (``AGNDCCascade.add_prior``)."""
         if not self.config.surface_nets_prior:
             return p0
-        from ..surfacenets import CENTRE, surface_cells, surface_nets_cells
+        from ..grid import crossed_edges, surface_cells
+        from ..surfacenets import CENTRE, surface_nets_cells
 
         # in place, at the cells with a crossed edge only: everywhere else the delta is 0
         # (CENTRE - CENTRE), and a dense field plus a copy of P_0 cost 0.6 GB at 256³
-        cells = surface_cells(occupancy0)
+        cells = np.flatnonzero(surface_cells(crossed_edges(occupancy0)))
         index = np.unravel_index(cells, p0.shape[:3])
         p0[index + (slice(0, 3),)] += surface_nets_cells(occupancy0, cells) - np.float32(CENTRE)
         return p0
