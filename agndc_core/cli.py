@@ -330,6 +330,7 @@ def _cmd_eval(args) -> int:
         check_shifts,
         evaluate_meshes,
         headroom_lines,
+        headroom_table,
         markdown_table,
         method_parts,
         parse_methods,
@@ -359,6 +360,8 @@ def _cmd_eval(args) -> int:
     print(markdown_table(summaries))
     for line in headroom_lines(summaries):  # none unless mc and a ceiling were evaluated
         print(line)
+    if len({r["category"] for r in rows}) > 1:
+        print(headroom_table(rows))
     if args.shifts > 1:
         print(shift_table(rows))
     print("written: " + ", ".join(str(p) for p in written.values()))

@@ -31,7 +31,8 @@ HEADROOM_CEILINGS = ("oracle", "oracle_binary")
 #: a method name with this suffix is evaluated with the mesh's bounding box (module docstring)
 BOUNDS_SUFFIX = "+bounds"
 #: MANIFEST.csv "kind" -> report category
-CATEGORIES = {"cad": "CAD", "organic": "organic", "print (Thingi10K)": "Thingi10K"}
+CATEGORIES = {"cad": "CAD", "organic": "organic", "print (Thingi10K)": "Thingi10K",
+              "print": "printed"}  # the last: the generated validation family (validation.py)
 
 
 def find_meshes(folder: Path) -> list[tuple[Path, str]]:
@@ -289,6 +290,32 @@ def headroom_lines(summaries, columns=HEADROOM_COLUMNS) -> list[str]:
     return [line for line in lines if line]
 
 
+def headroom_table(rows, ceiling: str = "oracle_binary", columns=HEADROOM_COLUMNS) -> str:
+    """A markdown table of each method's share of the MC→``ceiling`` headroom per category and
+    over all meshes (cells "CD % / EF1 %", ``headroom_shares`` of each group's means); "" when
+    mc or the ceiling was not evaluated."""
+    categories = list(dict.fromkeys(r["category"] for r in rows))
+    groups = [(c, [r for r in rows if r["category"] == c]) for c in categories]
+    groups.append(("all", rows))
+    shares = {name: headroom_shares(summarize_rows(group), columns, ceiling)
+              for name, group in groups}
+    if not shares["all"]:
+        return ""
+
+    def cell(share: dict) -> str:
+        return " / ".join("–" if math.isnan(share[c]) else f"{share[c]:.1f} %" for c in columns)
+
+    names = [name for name, _ in groups]
+    counts = {name: len({r["mesh"] for r in group}) for name, group in groups}
+    lines = [f"Share of the MC→{ceiling} headroom ({' / '.join(c.upper() for c in columns)})",
+             "", "| method | " + " | ".join(f"{n} ({counts[n]})" for n in names) + " |",
+             "|---" * (len(names) + 1) + "|"]
+    for method in shares["all"]:
+        lines.append(f"| {method} | " + " | ".join(
+            cell(shares[n][method]) if method in shares[n] else "–" for n in names) + " |")
+    return "\n".join(lines)
+
+
 def write_report(rows, out_dir: Path) -> dict[str, Path]:
     """Write rows.csv plus one markdown table per method (per category and overall)."""
     out_dir = Path(out_dir)
@@ -310,4 +337,8 @@ def write_report(rows, out_dir: Path) -> dict[str, Path]:
         # labels are free text (e.g. "w/o GDFEM"): keep file names to safe characters
         written[method] = out_dir / (re.sub(r"[^\w.-]+", "_", method).strip("_") + ".md")
         written[method].write_text(text)
+    table = headroom_table(rows)
+    if table:
+        written["headroom"] = out_dir / "headroom.md"
+        written["headroom"].write_text(table + "\n")
     return written

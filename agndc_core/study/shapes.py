@@ -569,11 +569,12 @@ def _taubin(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return verts
 
 
-def _organic(rng, segs) -> Manifold:
-    """Metaball iso-surface (marching cubes, Taubin smoothing, simplification); sometimes cut
-    flat by a plane or drilled by a CAD cutter."""
-    field, level, origin, step = _blob_field(rng)
-    if field.max() <= level:  # the dents and the noise ate every blob
+def field_surface(field: np.ndarray, level: float, origin: np.ndarray,
+                  step: float) -> Manifold:
+    """The solid where a sampled ``field`` (X, Y, Z) exceeds ``level`` (the field below it on
+    the border, so the surface is closed): marching cubes, Taubin smoothing, outward
+    orientation, simplification. ``origin``: (3,) position of sample 0; ``step``: spacing."""
+    if field.max() <= level:  # e.g. the dents and the noise ate every blob
         return Manifold()
     verts, faces, _, _ = marching_cubes(field, level, spacing=(step, step, step))
     verts = _taubin(verts.astype(np.float64) + origin, faces)
@@ -582,9 +583,15 @@ def _organic(rng, segs) -> Manifold:
         faces = faces[:, ::-1]  # outward orientation: positive signed volume
     body = Manifold(Mesh64(vert_properties=np.ascontiguousarray(verts),
                            tri_verts=np.ascontiguousarray(faces, dtype=np.uint64)))
+    return body if body.is_empty() else body.simplify(BLOB_SIMPLIFY)
+
+
+def _organic(rng, segs) -> Manifold:
+    """Metaball iso-surface (marching cubes, Taubin smoothing, simplification); sometimes cut
+    flat by a plane or drilled by a CAD cutter."""
+    body = field_surface(*_blob_field(rng))
     if body.is_empty():
         return body
-    body = body.simplify(BLOB_SIMPLIFY)
     u = rng.random()
     lo, hi = _bounds(body)
     if u < 0.2:  # a flat cut through the lower part along a random direction

@@ -17,6 +17,15 @@ def add_train_parser(sub) -> None:
                    "side, drawn log-uniform (default 32,128)")
     p.set_defaults(func=_cmd_data)
 
+    p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
+                       "MANIFEST.csv, for `agndc eval`): CAD, organic and printed shapes apart "
+                       "from the training generator, for choosing checkpoints and recipes")
+    p.add_argument("-o", "--out", type=Path, required=True)
+    p.add_argument("-n", "--count", type=int, default=48)
+    p.add_argument("--seed0", type=int, default=None, help="first seed (default 2,000,000)")
+    p.add_argument("--workers", type=int, default=2)
+    p.set_defaults(func=_cmd_val_data)
+
     p = sub.add_parser("distil-data", help="copy training samples with a teacher network's "
                        "finest vertices as their labels (training a cheaper student)")
     p.add_argument("--data", type=Path, required=True, help="folder from `agndc train-data`")
@@ -92,6 +101,18 @@ def _cmd_data(args) -> int:
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds)
     print(f"{len(paths)} samples in {args.out}")
+    return 0
+
+
+def _cmd_val_data(args) -> int:
+    from collections import Counter
+
+    from ..study.validation import SEED0, write_family
+
+    rows = write_family(args.out, args.count, SEED0 if args.seed0 is None else args.seed0,
+                        args.workers)
+    kinds = Counter(r["kind"] for r in rows)
+    print(f"{len(rows)} meshes in {args.out} ({', '.join(f'{n} {k}' for k, n in kinds.items())})")
     return 0
 
 

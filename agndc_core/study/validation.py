@@ -1,0 +1,394 @@
+"""The validation family: generated shapes for choosing checkpoints, recipes and thresholds.
+
+Model selection needs shapes the training never saw *and* that are not simply more draws of
+the training generator: a network tuned on its own distribution looks better there than on the
+meshes users bring. So this family has its own seed stream, its own classes and builders, and
+kinds the training generator (``shapes.py``) lacks. Its three classes are the three kinds of
+real meshes the remesher is judged on:
+
+- ``cad`` (machined parts): the training generator's parts turned 1-15° off the grid axes (the
+  slightly tilted faces that come out wavy; training has only aligned or uniformly random
+  turns), flanges with bolt circles, spur gears with a keyed bore, thin bent brackets with holes
+  and a gusset.
+- ``organic``: figurines blended from ellipsoids and capsules with a smooth minimum (training
+  blobs are metaball sums), and knotted tubes.
+- ``print`` (3-D-printing models): thin-walled vases and cups, low-poly faceted sculptures
+  (flat faces at every angle, sharp creases), hexagonal lattice panels, name plates with
+  raised pixel glyphs, stepped pyramids.
+
+``validation_shape(seed)`` returns the class, the builder's name and a normalised closed mesh
+(bounding-box centre at the origin, longest side 1), deterministic in the seed. ``write_family``
+writes OBJ files and a ``MANIFEST.csv`` whose ``kind`` column ``agndc eval`` reports by.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+from manifold3d import CrossSection, Manifold, OpType
+
+from .shapes import (
+    MAX_ATTEMPTS,
+    _assemble,
+    _bounds,
+    _drop_slivers,
+    _edge_manifold,
+    _revolve,
+    _rounded_rect,
+    _smooth_curve,
+    _to_arrays,
+    field_surface,
+)
+
+#: a stream of its own: the same seed never draws what ``shapes.generate_shape`` draws
+SEED_STREAM = 104729
+#: first seed of ``agndc val-data`` (training uses 0.., the older validation 1,000,000..)
+SEED0 = 2_000_000
+#: classes (MANIFEST ``kind``) and their shares of the seeds
+CLASSES = ("cad", "organic", "print")
+CLASS_WEIGHTS = (0.40, 0.25, 0.35)
+#: tilt off the grid axes of the turned CAD and printed shapes, degrees
+TILT_DEGREES = (1.0, 15.0)
+#: share of CAD and printed shapes left on the grid axes (a signed axis permutation)
+ALIGNED_SHARE = 0.4
+#: wall thickness of thin parts, in voxels at 64^3 (shapes are ~1 across)
+WALL_VOXELS = (1.5, 4.0)
+#: samples per unit length of the organic classes' fields
+FIELD_SAMPLES = 96
+
+
+def _voxels(rng, lo: float, hi: float) -> float:
+    """A length of ``lo``..``hi`` voxels at 64^3, in the shapes' units."""
+    return rng.uniform(lo, hi) / 64.0
+
+
+# ---------------------------------------------------------------- CAD
+
+
+def _tilted_part(rng, segs) -> Manifold:
+    """A part of the training generator's CAD family, placed by ``_place`` (often tilted)."""
+    return _assemble(rng, segs)
+
+
+def _flange(rng, segs) -> Manifold:
+    """A disc with a raised hub, a bore and a circle of 4-8 bolt holes, sometimes a chamfered
+    rim."""
+    r_out, thick = rng.uniform(0.4, 0.5), rng.uniform(0.06, 0.15)
+    r_hub, hub_h = r_out * rng.uniform(0.3, 0.5), thick * rng.uniform(1.0, 3.0)
+    disc = Manifold.cylinder(thick, r_out, r_out * rng.choice([1.0, 0.93]), segs * 2)
+    hub = Manifold.cylinder(thick + hub_h, r_hub, r_hub, segs)
+    body = disc + hub
+    r_bore = r_hub * rng.uniform(0.4, 0.7)
+    n = int(rng.integers(4, 9))
+    r_bolt = rng.uniform(0.04, 0.07)
+    r_circle = (r_hub + r_out) / 2
+    hole = Manifold.cylinder(4 * hub_h, r_bolt, r_bolt, segs).translate((0, 0, -hub_h))
+    cuts = [Manifold.cylinder(4 * hub_h, r_bore, r_bore, segs).translate((0, 0, -hub_h))]
+    cuts += [hole.translate((r_circle * np.cos(a), r_circle * np.sin(a), 0))
+             for a in 2 * np.pi * (np.arange(n) + rng.uniform()) / n]
+    return Manifold.batch_boolean([body, *cuts], OpType.Subtract)
+
+
+def _gear(rng, segs) -> Manifold:
+    """A spur gear: 10-28 trapezoidal teeth, a bore with a key slot, sometimes a hub."""
+    teeth = int(rng.integers(10, 29))
+    r_tip = 0.5
+    r_root = r_tip * (1 - rng.uniform(0.08, 0.18) * 28 / max(teeth, 14))
+    # per tooth: root, flank up, tip land, flank down (angles in tooth pitches)
+    pattern = np.array([[0.0, r_root], [0.15, r_root], [0.3, r_tip], [0.5, r_tip],
+                        [0.65, r_root], [0.85, r_root]])
+    turns = (np.arange(teeth)[:, None] + pattern[None, :, 0]).reshape(-1) * 2 * np.pi / teeth
+    radii = np.tile(pattern[:, 1], teeth)
+    outline = np.stack([radii * np.cos(turns), radii * np.sin(turns)], -1)
+    width = rng.uniform(0.1, 0.3)
+    body = CrossSection([outline]).extrude(width)
+    if rng.random() < 0.5:
+        r_hub = r_root * rng.uniform(0.35, 0.5)
+        body = body + Manifold.cylinder(width * rng.uniform(1.5, 2.5), r_hub, r_hub, segs)
+    r_bore = r_root * rng.uniform(0.15, 0.3)
+    bore = Manifold.cylinder(2, r_bore, r_bore, segs).translate((0, 0, -0.5))
+    key = Manifold.cube((r_bore * 0.6, r_bore * 0.9, 2)).translate(
+        (-r_bore * 0.3, r_bore * 0.6, -0.5))
+    return body - (bore + key)
+
+
+def _bracket(rng, segs) -> Manifold:
+    """A bent sheet-metal-like bracket (L or U) 1.5-4 voxels thick at 64^3, with holes in
+    its legs and sometimes a gusset."""
+    t = _voxels(rng, *WALL_VOXELS)
+    length, width = rng.uniform(0.6, 1.0), rng.uniform(0.3, 0.6)
+    leg = rng.uniform(0.3, 0.6)
+    base = Manifold.cube((length, width, t))
+    legs = [Manifold.cube((t, width, leg))]
+    if rng.random() < 0.4:  # U: a second leg at the other end
+        legs.append(Manifold.cube((t, width, leg)).translate((length - t, 0, 0)))
+    body = Manifold.batch_boolean([base, *legs], OpType.Add)
+    r = min(width, leg) * rng.uniform(0.08, 0.16)
+    hole = Manifold.cylinder(1.0, r, r, segs)
+    cuts = [hole.translate((x, width / 2, -0.5))
+            for x in np.linspace(0.3, 0.85, int(rng.integers(1, 4))) * length]
+    cuts.append(hole.rotate((0, 90, 0)).translate((-0.5, width / 2, leg * 0.6)))
+    body = Manifold.batch_boolean([body, *cuts], OpType.Subtract)
+    if rng.random() < 0.5:  # a triangular gusset in the corner
+        g = rng.uniform(0.15, 0.3)
+        tri = CrossSection([np.array([[0.0, 0.0], [g, 0.0], [0.0, g]])])
+        gusset = tri.extrude(t).rotate((90, 0, 0)).translate((t, width / 2 + t / 2, t))
+        body = body + gusset
+    return body
+
+
+# ---------------------------------------------------------------- organic
+
+
+def _field_grid(lo: np.ndarray, hi: np.ndarray):
+    """Sample axes over the box [lo, hi] (plus a border) and their spacing."""
+    step = 1.0 / FIELD_SAMPLES
+    axes = [np.arange(a - 3 * step, b + 3 * step, step) for a, b in zip(lo, hi)]
+    return axes, step
+
+
+def _figurine(rng, segs) -> Manifold:
+    """A body, a head and 2-6 limbs (ellipsoids and tapered capsules) blended by a smooth
+    minimum of their distance fields, so they join with fillets instead of creases."""
+    parts = []  # (centre a, end b, radius at a, radius at b)
+    body = rng.uniform(0.18, 0.28)
+    parts.append((np.zeros(3), np.array([0.0, 0.0, rng.uniform(0.1, 0.3)]), body, body * 0.8))
+    head = body * rng.uniform(0.5, 0.8)
+    top = parts[0][1] + np.array([0.0, 0.0, body * 0.8 + head * 0.7])
+    parts.append((top, top, head, head))
+    for _ in range(int(rng.integers(2, 7))):
+        root = rng.normal(0, 1, 3)
+        root *= body * 0.7 / np.linalg.norm(root)
+        direction = root / np.linalg.norm(root) + rng.normal(0, 0.5, 3)
+        tip = root + direction / np.linalg.norm(direction) * rng.uniform(0.2, 0.45)
+        r = body * rng.uniform(0.2, 0.4)
+        parts.append((root, tip, r, r * rng.uniform(0.5, 1.0)))
+    ends = np.array([p[:2] for p in parts]).reshape(-1, 3)
+    reach = max(p[2] for p in parts)
+    axes, step = _field_grid(ends.min(0) - reach, ends.max(0) + reach)
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    k = rng.uniform(0.03, 0.08)  # blend width of the smooth minimum
+    blend = np.zeros(len(points))
+    for a, b, ra, rb in parts:  # a loop over the 4-8 parts, each vectorised over the points
+        ab = b - a
+        t = np.clip((points - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+        d = np.linalg.norm(points - (a + t[:, None] * ab), axis=1) - (ra + t * (rb - ra))
+        blend += np.exp(-d / k)
+    field = -(-k * np.log(np.maximum(blend, 1e-300)))  # inside > 0
+    field = field.reshape([len(x) for x in axes])
+    return field_surface(field, 0.0, np.array([x[0] for x in axes]), step)
+
+
+def _knot(rng, segs) -> Manifold:
+    """A tube along a (p, q) torus knot (trefoil, cinquefoil, ...), a union of capsules."""
+    p, q = [(2, 3), (2, 5), (3, 4), (3, 5), (2, 7)][rng.integers(5)]
+    t = np.linspace(0, 2 * np.pi, 12 * (p + q), endpoint=False)
+    big, small = 0.3, rng.uniform(0.1, 0.16)
+    r = (big + small * np.cos(q * t))
+    curve = np.stack([r * np.cos(p * t), r * np.sin(p * t), small * np.sin(q * t)], -1)
+    curve[:, 2] *= rng.uniform(1.0, 2.0)
+    tube = rng.uniform(0.035, 0.06)
+    ball = Manifold.sphere(tube, 16)
+    pieces = [Manifold.batch_hull([ball.translate(tuple(a)), ball.translate(tuple(b))])
+              for a, b in zip(curve, np.roll(curve, -1, axis=0))]
+    return Manifold.batch_boolean(pieces, OpType.Add)
+
+
+# ---------------------------------------------------------------- printed
+
+
+def _vase(rng, segs) -> Manifold:
+    """A vase or cup: a revolved smooth profile hollowed to a wall 1.5-4 voxels thick, open at
+    the top, sometimes with a handle."""
+    z = np.linspace(0, rng.uniform(0.6, 1.0), 24)
+    radius = 0.12 + 0.3 * _smooth_curve(rng, np.linspace(0, 1, 24), 0.3)
+    wall = _voxels(rng, *WALL_VOXELS)
+    floor = wall * rng.uniform(1.0, 3.0)
+    outer = _revolve(np.stack([radius, z], -1), segs * 2)
+    inner_profile = np.stack([np.maximum(radius - wall, wall), z + floor], -1)
+    inner_profile[-1, 1] = z[-1] + 1.0  # through the top: open
+    body = outer - _revolve(inner_profile, segs * 2)
+    if rng.random() < 0.35:  # a handle: a torus segment on the side
+        ring = CrossSection.circle(wall * 1.5, 16).translate((0.12, 0)).revolve(segs)
+        handle = ring.rotate((90, 0, 0)).translate((radius[12], 0, z[12]))
+        body = body + (handle - _revolve(np.stack([radius * 0.99, z], -1), segs * 2))
+    return body
+
+
+def _low_poly(rng, segs) -> Manifold:
+    """A faceted sculpture: the union of 2-5 convex hulls of 8-20 random points each (flat
+    faces at every angle, sharp creases)."""
+    hulls = []
+    for _ in range(int(rng.integers(2, 6))):
+        centre = rng.uniform(-0.25, 0.25, 3)
+        points = centre + rng.normal(0, 1, (int(rng.integers(8, 21)), 3)) * rng.uniform(
+            0.1, 0.3, 3)
+        hulls.append(Manifold.hull_points(points))
+    return Manifold.batch_boolean(hulls, OpType.Add)
+
+
+def _lattice_panel(rng, segs) -> Manifold:
+    """A plate with a rim and a honeycomb of hexagonal holes (walls of a few voxels)."""
+    w, h = rng.uniform(0.6, 1.0), rng.uniform(0.4, 0.8)
+    thick = rng.uniform(0.04, 0.12)
+    plate = Manifold.cube((w, h, thick), center=True)
+    cell = rng.uniform(0.08, 0.15)
+    web = _voxels(rng, 2.0, 4.0)
+    hexagon = CrossSection.circle((cell - web) / np.sqrt(3), 6).extrude(2 * thick)
+    hexagon = hexagon.translate((0, 0, -thick))
+    rim = _voxels(rng, 3.0, 6.0)
+    xs = np.arange(-w / 2 + rim + cell / 2, w / 2 - rim - cell / 2, cell * 0.75 * 2 / np.sqrt(3))
+    holes = []
+    for i, x in enumerate(xs):  # a loop over a dozen columns of holes
+        ys = np.arange(-h / 2 + rim + cell / 2, h / 2 - rim - cell / 2 + 1e-9, cell)
+        holes += [hexagon.translate((x, y + (cell / 2 if i % 2 else 0.0), 0)) for y in ys
+                  if abs(y + (cell / 2 if i % 2 else 0.0)) < h / 2 - rim - cell / 2]
+    return Manifold.batch_boolean([plate, *holes], OpType.Subtract) if holes else plate
+
+
+def _name_plate(rng, segs) -> Manifold:
+    """A rounded plate with raised (or engraved) pixel glyphs: 3-6 random 5 x 7 bitmaps, one
+    pixel 1.5-3 voxels across at 64^3."""
+    n = int(rng.integers(3, 7))
+    pixel = _voxels(rng, 1.5, 3.0)
+    glyphs = rng.random((n, 7, 5)) < 0.45
+    width, height = n * 6 * pixel + 4 * pixel, 11 * pixel
+    thick = rng.uniform(0.04, 0.1)
+    plate = _rounded_rect(width, height, 1.5 * pixel, segs).extrude(thick)
+    k, row, col = np.nonzero(glyphs)
+    relief = pixel * rng.uniform(1.0, 2.0)
+    engrave = rng.random() < 0.4
+    z = thick - relief if engrave else thick - pixel / 4
+    cubes = [Manifold.cube((pixel, pixel, relief + pixel / 4)).translate(
+        (-width / 2 + 2 * pixel + (6 * g + c) * pixel, -3.5 * pixel + (6 - r) * pixel, z))
+        for g, r, c in zip(k, row, col)]
+    if not cubes:
+        return plate
+    return Manifold.batch_boolean([plate, *cubes], OpType.Subtract if engrave else OpType.Add)
+
+
+def _stepped(rng, segs) -> Manifold:
+    """A stepped pyramid or ziggurat: 3-8 stacked boxes, each smaller, sometimes hollow."""
+    steps = int(rng.integers(3, 9))
+    size = np.array([rng.uniform(0.6, 1.0), rng.uniform(0.6, 1.0)])
+    rise = rng.uniform(0.04, 0.12)
+    shrink = size / (steps + 1) * rng.uniform(0.5, 1.0)
+    boxes = [Manifold.cube((*(size - i * shrink), rise * (i + 1)), center=False).translate(
+        (*(-(size - i * shrink) / 2), 0)) for i in range(steps)]
+    body = Manifold.batch_boolean(boxes, OpType.Add)
+    if rng.random() < 0.3:  # a stair cut into one side
+        body = body - Manifold.cube((size[0] / 4, size[1], rise * steps)).translate(
+            (-size[0] / 8, size[1] / 4, rise))
+    return body
+
+
+BUILDERS = {
+    "cad": {"tilted_part": (_tilted_part, 0.40), "flange": (_flange, 0.2),
+            "gear": (_gear, 0.2), "bracket": (_bracket, 0.2)},
+    "organic": {"figurine": (_figurine, 0.6), "knot": (_knot, 0.4)},
+    "print": {"vase": (_vase, 0.25), "low_poly": (_low_poly, 0.25),
+              "lattice_panel": (_lattice_panel, 0.2), "name_plate": (_name_plate, 0.15),
+              "stepped": (_stepped, 0.15)},
+}
+
+
+def _draw(rng, table: dict):
+    """A key of ``table`` ({key: (value, weight)}) drawn by weight, and its value."""
+    keys = list(table)
+    weights = np.array([table[k][1] for k in keys])
+    key = keys[rng.choice(len(keys), p=weights / weights.sum())]
+    return key, table[key][0]
+
+
+def _tilt(rng) -> np.ndarray:
+    """(3, 3) rotation by 1-15° about a random axis."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angle = np.radians(rng.uniform(*TILT_DEGREES))
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def _uniform_rotation(rng) -> np.ndarray:
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+def _place(m: Manifold, rng, kind: str) -> Manifold:
+    """A signed axis permutation, then (CAD and printed: all but ``ALIGNED_SHARE``) a 1-15°
+    tilt, or (organic) a uniform rotation."""
+    perm = np.eye(3)[rng.permutation(3)] * rng.choice([-1.0, 1.0], 3)
+    if np.linalg.det(perm) < 0:
+        perm[2] = -perm[2]
+    if kind == "organic":
+        turn = _uniform_rotation(rng)
+    else:
+        turn = np.eye(3) if rng.random() < ALIGNED_SHARE else _tilt(rng)
+    affine = np.zeros((3, 4))
+    affine[:, :3] = turn @ perm
+    return m.transform(affine)
+
+
+def class_of(seed: int) -> str:
+    """The class (one of ``CLASSES``) of ``validation_shape(seed)``; cheap."""
+    # (stream, seed): numpy's SeedSequence reads (seed, stream) and (seed, stream, 0) alike,
+    # and the class must not share its draws with attempt 0 of the shape
+    rng = np.random.default_rng((SEED_STREAM, seed))
+    weights = np.array(CLASS_WEIGHTS)
+    return CLASSES[rng.choice(len(CLASSES), p=weights / weights.sum())]
+
+
+def validation_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
+    """(class, builder name, (V, 3) float64 vertices, (F, 3) int64 faces) of one seed: a
+    closed, outward, edge-manifold mesh, bounding-box centre at the origin, longest side 1."""
+    kind = class_of(seed)
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, SEED_STREAM, attempt))
+        name, build = _draw(rng, BUILDERS[kind])
+        segs = int(rng.integers(24, 65))
+        m = build(rng, segs)
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        m = _drop_slivers(_place(m, rng, kind))
+        lo, hi = _bounds(m)
+        if (hi - lo).min() <= 0.05 * (hi - lo).max():  # a needle or a sheet
+            continue
+        vertices, faces = _to_arrays(m)
+        if _edge_manifold(faces):
+            return kind, name, vertices, faces
+    raise RuntimeError(f"validation seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+
+
+def _write_one(args) -> dict:
+    seed, out = args
+    from ..gridio import save_mesh
+
+    kind, name, vertices, faces = validation_shape(seed)
+    path = f"val_{seed}.obj"
+    save_mesh(vertices, faces, Path(out) / path)
+    return {"file": path, "kind": kind, "shape": name, "seed": seed, "faces": len(faces)}
+
+
+def write_family(out, n: int, seed0: int = SEED0, workers: int = 2) -> list[dict]:
+    """Write seeds ``seed0 .. seed0 + n - 1`` as OBJ files and ``MANIFEST.csv`` (file, kind,
+    shape, seed, faces) into ``out``; returns the manifest rows."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(seed, str(out)) for seed in range(seed0, seed0 + n)]
+    if workers > 1:
+        from multiprocessing import get_context
+
+        with get_context("spawn").Pool(workers) as pool:
+            rows = pool.map(_write_one, jobs)
+    else:
+        rows = [_write_one(job) for job in jobs]
+    with open(out / "MANIFEST.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return rows
