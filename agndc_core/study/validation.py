@@ -11,7 +11,8 @@ real meshes the remesher is judged on:
   turns), flanges with bolt circles, spur gears with a keyed bore, thin bent brackets with holes
   and a gusset.
 - ``organic``: figurines blended from ellipsoids and capsules with a smooth minimum (training
-  blobs are metaball sums), and knotted tubes.
+  blobs are metaball sums), half of them wrinkled like a scan (waves 3-10 voxels long), and
+  knotted tubes.
 - ``print`` (3-D-printing models): thin-walled vases and cups, low-poly faceted sculptures
   (flat faces at every angle, sharp creases), hexagonal lattice panels, name plates with
   raised pixel glyphs, stepped pyramids.
@@ -57,6 +58,9 @@ ALIGNED_SHARE = 0.4
 WALL_VOXELS = (1.5, 4.0)
 #: samples per unit length of the organic classes' fields
 FIELD_SAMPLES = 96
+#: share of the figurines with a scanned look, and their wrinkles' wavelengths (voxels at 64^3)
+WRINKLED_SHARE = 0.5
+WRINKLE_VOXELS = (3.0, 10.0)
 
 
 def _voxels(rng, lo: float, hi: float) -> float:
@@ -176,9 +180,22 @@ def _figurine(rng, segs) -> Manifold:
         t = np.clip((points - a) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
         d = np.linalg.norm(points - (a + t[:, None] * ab), axis=1) - (ra + t * (rb - ra))
         blend += np.exp(-d / k)
-    field = -(-k * np.log(np.maximum(blend, 1e-300)))  # inside > 0
-    field = field.reshape([len(x) for x in axes])
+    field = (k * np.log(np.maximum(blend, 1e-300))).reshape([len(x) for x in axes])  # inside > 0
+    if rng.random() < WRINKLED_SHARE:  # a scanned look: wrinkles a few voxels across
+        field += _wrinkles(rng, axes)
     return field_surface(field, 0.0, np.array([x[0] for x in axes]), step)
+
+
+def _wrinkles(rng, axes) -> np.ndarray:
+    """(X, Y, Z) sum of 8 plane waves of 3-10 voxels wavelength at 64^3 and 0.1-0.4 voxel
+    amplitude each, over the sample ``axes`` (each a product of 1-D phasors)."""
+    j = 8
+    direction = rng.normal(0.0, 1.0, (j, 3))
+    wavelength = rng.uniform(*WRINKLE_VOXELS, (j, 1)) / 64.0
+    freq = 2 * np.pi * direction / np.linalg.norm(direction, axis=1, keepdims=True) / wavelength
+    coef = rng.uniform(0.1, 0.4, j) / 64.0 * np.exp(1j * rng.uniform(0, 2 * np.pi, j))
+    w = [np.exp(1j * freq[:, i:i + 1] * ax[None, :]) for i, ax in enumerate(axes)]
+    return np.einsum("ji,jk,jl->ikl", coef[:, None] * w[0], w[1], w[2]).imag
 
 
 def _knot(rng, segs) -> Manifold:

@@ -17,6 +17,7 @@ from agndc_core.study.evaluate import (
     headroom_line,
     headroom_lines,
     headroom_shares,
+    headroom_table,
     method_parts,
     parse_methods,
     shift_table,
@@ -68,6 +69,27 @@ def test_headroom_shares_from_the_means():
     assert [line.split(" headroom")[0] for line in lines] == [
         "Share of the MC→oracle", "Share of the MC→oracle_binary"]
     assert headroom_lines(summaries) == [headroom_line(summaries)]
+
+
+def test_headroom_table_per_category():
+    def row(mesh, category, method, cd, ef1):
+        return {"mesh": mesh, "category": category, "method": method, "cd": cd, "f1": 0.5,
+                "nc": 0.9, "ecd": 0.1, "ef1": ef1, "seconds": 1.0}
+
+    rows = []
+    # CAD: one mesh, mc 10 -> ceiling 6; organic: two meshes, mc 4 -> ceiling 2 (means)
+    meshes = (("p", "CAD", 10.0, 8.0, 6.0), ("q", "organic", 5.0, 3.0, 2.0),
+              ("r", "organic", 3.0, 3.0, 2.0))
+    for mesh, category, mc, a, top in meshes:
+        rows += [row(mesh, category, "mc", mc, 0.1), row(mesh, category, "a", a, 0.2),
+                 row(mesh, category, "oracle_binary", top, 0.3)]
+    table = headroom_table(rows).splitlines()
+    assert table[0] == "Share of the MC→oracle_binary headroom (CD / EF1)"
+    assert table[2] == "| method | CAD (1) | organic (2) | all (3) |"
+    # CAD (10 - 8) / (10 - 6); organic (4 - 3) / (4 - 2); all: means 6 -> 4.667 of 6 -> 3.333
+    assert table[5] == "| a | 50.0 % / 50.0 % | 50.0 % / 50.0 % | 50.0 % / 50.0 % |"
+    assert table[4].startswith("| mc | 0.0 % / 0.0 %")
+    assert headroom_table([r for r in rows if r["method"] != "oracle_binary"]) == ""
 
 
 def test_rotated_box_is_a_closed_turned_box():
