@@ -3,14 +3,17 @@
 # binary-targets-curriculum.md) trained on one thread at the lowest priority, resumable at any
 # moment. Run it again to go on where it stopped (each stage resumes bit-exactly from its state
 # shards; a finished stage is skipped):
-#   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] > lineage.log 2>&1 &
+#   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] [undc] > lineage.log 2>&1 &
 # Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100, +100);
 # stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets. Pause it for a
 # benchmark with kill -STOP / kill -CONT on the `agndc train` process.
+# With a third argument `undc`: the lineage's UNDC twin instead (the same data, steps, seeds and
+# curriculum), the baseline of the AGNDC-against-UNDC comparison in docs/training.md.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${1:-/work/data/v2_train}
 runs=${2:-/work/runs}
+which=${3:-agndc}
 export OMP_NUM_THREADS=1
 if [[ ! -f "$data/.done" ]]; then
     .venv/bin/agndc train-data -o "$data" -n 900 --workers 1 && touch "$data/.done"
@@ -26,6 +29,13 @@ stage() {  # stage NAME ARGS...: run or resume one stage; skip it once final.saf
     .venv/bin/agndc train -o "$runs/$name" "${common[@]}" "$@" "${resume[@]}"
 }
 
+if [[ $which == undc ]]; then
+    stage bt_undc16_long --undc --model '{"width": 16}' --lr 1e-3 --seed 5 --steps 3000 \
+        --binary-targets --val-steps 3000
+    stage dt_undc16_cont --undc --model '{"width": 16}' \
+        --init "$runs/bt_undc16_long/step-003000.safetensors" --lr 5e-4 --seed 6 --steps 2400
+    exit 0
+fi
 stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets --val-steps 3000
 stage dt_agndc16_cont --init "$runs/bt_agndc16_long/step-003000.safetensors" --lr 5e-4 --seed 6 \
     --steps 2400,0,0

@@ -331,8 +331,9 @@ def _inference_threads() -> int:
 
 # -- picture ----------------------------------------------------------------------------------
 
-def render_figure(meshes, names, path, *, resolution=64) -> bool:
-    """A grid of renders: one row per named shape, columns ``FIGURE_COLUMNS``. False if none.
+def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS) -> bool:
+    """A grid of renders: one row per named shape, one column per (title, method, options) of
+    ``columns`` (method None: the ground truth). False if none.
 
     ``names`` are file stems of ``meshes`` or ``ROTATED_BOX``; names found nowhere are skipped.
     """
@@ -346,10 +347,10 @@ def render_figure(meshes, names, path, *, resolution=64) -> bool:
     chosen = _figure_shapes(meshes, names)
     if not chosen:
         return False
-    n_cols = len(FIGURE_COLUMNS)
+    n_cols = len(columns)
     fig = plt.figure(figsize=(3.6 * n_cols, 3.6 * len(chosen)), dpi=110)
     for row, (name, category, vertices, faces) in enumerate(chosen):
-        for col, (title, method, options) in enumerate(FIGURE_COLUMNS):
+        for col, (title, method, options) in enumerate(columns):
             if method is None:
                 pv, pf = vertices, faces
             else:
