@@ -15,6 +15,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--resolutions", default="32,128", help="LO,HI voxels on a shape's longest "
                    "side, drawn log-uniform (default 32,128)")
+    p.add_argument("--wrinkled", type=float, default=0.0, help="share of the organic and "
+                   "smooth shapes whose surface gets fine wrinkles, waves 3-10 voxels long at "
+                   "64 voxels, like a scan (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -99,7 +102,7 @@ def _cmd_data(args) -> int:
     if len(bounds) != 2:
         raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
-                          resolution_range=bounds)
+                          resolution_range=bounds, wrinkled=args.wrinkled)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

@@ -23,6 +23,14 @@ from ..study.shapes import generate_shape, is_axis_aligned, shape_family
 from ..voxelize import voxelize
 
 RESOLUTION_RANGE = (32, 128)  # voxels on the longest side (random scale, log-uniform)
+#: wrinkles of a scanned surface (``sample_recipe(wrinkled=...)``): the families that get them,
+#: the plane waves' count, wavelengths and amplitudes as fractions of the shape's longest side
+#: (3-10 and 0.1-0.3 voxels when it spans 64 voxels: finer than the smooth noise of the organic
+#: family, whose waves are 25-64 voxels long there)
+WRINKLED_FAMILIES = ("organic", "smooth")
+WRINKLE_WAVES = 8
+WRINKLE_WAVELENGTH = (3 / 64, 10 / 64)
+WRINKLE_AMPLITUDE = (0.1 / 64, 0.3 / 64)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -40,21 +48,25 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
     return int(min(np.floor(np.exp(rng.uniform(np.log(lo), np.log(hi + 1)))), hi))
 
 
-def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0) -> dict:
+def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
+                  wrinkled: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
     free rotation, so those are never rotated again here; ``rotate_fraction`` is the share of
     the generator's axis-aligned shapes that get a random rotation here. The share of
     grid-aligned samples is ``AXIS_ALIGNED_FRACTION * (1 - rotate_fraction)`` (0.35 by default).
-    The recipe also records the shape family and whether the sample is grid-aligned.
+    ``wrinkled`` is the share of the ``WRINKLED_FAMILIES`` samples whose surface gets fine
+    wrinkles (``wrinkle_mesh``); its draws come after all others, so the other fields of a seed
+    do not depend on it. The recipe also records the shape family and whether the sample is
+    grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
     rotation, u_rotate = random_rotation(rng), rng.random()
     generator_aligned = is_axis_aligned(seed)
     rotate = generator_aligned and u_rotate < rotate_fraction  # never a second rotation
-    return {
+    recipe = {
         "seed": int(seed),
         "resolution": log_uniform_int(rng, *resolution_range),
         "rotation": (rotation if rotate else np.eye(3)).tolist(),
@@ -62,11 +74,38 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         "family": shape_family(seed),
         "axis_aligned": generator_aligned and not rotate,
     }
+    if wrinkled > 0 and rng.random() < wrinkled and recipe["family"] in WRINKLED_FAMILIES:
+        direction = rng.normal(size=(WRINKLE_WAVES, 3))
+        direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+        recipe["wrinkles"] = {
+            "direction": direction.tolist(),
+            "wavelength": rng.uniform(*WRINKLE_WAVELENGTH, WRINKLE_WAVES).tolist(),
+            "amplitude": rng.uniform(*WRINKLE_AMPLITUDE, WRINKLE_WAVES).tolist(),
+            "phase": rng.uniform(0, 2 * np.pi, WRINKLE_WAVES).tolist(),
+        }
+    return recipe
+
+
+def wrinkle_mesh(vertices: np.ndarray, faces: np.ndarray, wrinkles: dict):
+    """The mesh subdivided to edges of a quarter of the shortest wavelength, every vertex moved
+    along its normal by a sum of plane waves: (V', 3) float64, (F', 3) int64."""
+    import trimesh
+    from trimesh.remesh import subdivide_to_size
+
+    wavelength = np.asarray(wrinkles["wavelength"])
+    vertices, faces = subdivide_to_size(vertices, faces, wavelength.min() / 4, max_iter=20)
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals  # (V, 3)
+    k = 2 * np.pi * np.asarray(wrinkles["direction"]) / wavelength[:, None]  # (W, 3)
+    height = np.sin(vertices @ k.T + np.asarray(wrinkles["phase"])) @ np.asarray(
+        wrinkles["amplitude"])  # (V,)
+    return vertices + normals * height[:, None], np.asarray(faces, dtype=np.int64)
 
 
 def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
     """The ground-truth mesh of a recipe: (V, 3) float64, (F, 3) int64."""
     vertices, faces = generate_shape(recipe["seed"])
+    if "wrinkles" in recipe:
+        vertices, faces = wrinkle_mesh(vertices, faces, recipe["wrinkles"])
     return vertices @ np.asarray(recipe["rotation"]).T, faces
 
 
@@ -111,7 +150,7 @@ def _write_one(args) -> str:
 
 
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
-                  resolution_range=RESOLUTION_RANGE) -> list[Path]:
+                  resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -128,7 +167,7 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
         raise AGNDCError(f"training resolutions must satisfy 8 <= lo <= hi, got {lo}..{hi}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sample_recipe(seed, (lo, hi)), out_dir / f"sample_{seed:06d}.npz")
+    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled), out_dir / f"sample_{seed:06d}.npz")
             for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:

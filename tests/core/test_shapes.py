@@ -16,7 +16,15 @@ from agndc_core.study.shapes import (
     is_axis_aligned,
     shape_family,
 )
-from agndc_core.training.data import RESOLUTION_RANGE, sample_recipe
+from agndc_core.training.data import (
+    RESOLUTION_RANGE,
+    WRINKLE_AMPLITUDE,
+    WRINKLE_WAVELENGTH,
+    WRINKLE_WAVES,
+    WRINKLED_FAMILIES,
+    recipe_mesh,
+    sample_recipe,
+)
 
 #: the first few seeds of every family, so each family's builders are exercised
 PER_FAMILY = 6
@@ -93,6 +101,34 @@ def test_recipes_rotate_once_and_draw_log_uniform_resolutions():
     turned = [r for r in (sample_recipe(s, rotate_fraction=1.0) for s in range(200))
               if not np.array_equal(r["rotation"], np.eye(3))]
     assert turned and all(is_axis_aligned(r["seed"]) and not r["axis_aligned"] for r in turned)
+
+
+def test_wrinkled_recipes_keep_their_other_draws_and_give_closed_wrinkled_meshes():
+    seeds = range(300)
+    plain = [sample_recipe(s) for s in seeds]
+    wrinkled = [sample_recipe(s, wrinkled=0.5) for s in seeds]
+    for a, b in zip(plain, wrinkled):
+        assert {k: v for k, v in b.items() if k != "wrinkles"} == a and "wrinkles" not in a
+    chosen = [r for r in wrinkled if "wrinkles" in r]
+    eligible = [r for r in wrinkled if r["family"] in WRINKLED_FAMILIES]
+    assert all(r["family"] in WRINKLED_FAMILIES for r in chosen)
+    assert len(chosen) / len(eligible) == pytest.approx(0.5, abs=0.15)
+    waves = chosen[0]["wrinkles"]
+    assert len(waves["wavelength"]) == WRINKLE_WAVES
+    assert WRINKLE_WAVELENGTH[0] <= min(waves["wavelength"]) <= WRINKLE_WAVELENGTH[1]
+    unwrinkled = {k: v for k, v in chosen[0].items() if k != "wrinkles"}
+    smooth = trimesh.Trimesh(*recipe_mesh(unwrinkled), process=False)
+    mesh = trimesh.Trimesh(*recipe_mesh(chosen[0]), process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    # subdivided finer than the shortest wave (an edge then stretches by at most both ends'
+    # displacements), every vertex within the summed amplitudes of the smooth surface, and the
+    # surface really moved
+    edges = np.linalg.norm(np.diff(mesh.vertices[mesh.edges_unique], axis=1)[:, 0], axis=1)
+    assert edges.max() <= min(waves["wavelength"]) / 4 + 2 * sum(waves["amplitude"])
+    assert len(mesh.faces) > 4 * len(smooth.faces)
+    distance = np.abs(trimesh.proximity.signed_distance(smooth, mesh.vertices[::50]))
+    assert distance.max() <= sum(waves["amplitude"]) + 1e-6
+    assert distance.mean() > 0.2 * WRINKLE_AMPLITUDE[0]
 
 
 def _on_grid_share(mesh) -> float:
