@@ -16,6 +16,8 @@
 # AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
 # AGNDC_RESOLUTIONS=LO,HI: the training shapes' voxels on their longest side (default 32,128);
 # each range has its own data folder. The held-out samples stay 32-128 (comparable runs).
+# AGNDC_WRINKLED=SHARE: the share of organic and smooth shapes with fine wrinkles (`agndc
+# train-data --wrinkled`, default 0.5; docs/experiments/wrinkled-training.md), its own folder too.
 #
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
 # kernels, not by the GPU, docs/experiments/step-times.md):
@@ -45,7 +47,8 @@ agndc() { "$py" -m agndc_core.cli "$@"; }
 alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }  # the process of a pid file
 data=/tmp/agndc_data
 resolutions=${AGNDC_RESOLUTIONS:-32,128}
-train="$data/train_${resolutions/,/-}"
+wrinkled=${AGNDC_WRINKLED:-0.5}
+train="$data/train_${resolutions/,/-}_w$wrinkled"
 mkdir -p /tmp/agndc_runs
 agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
@@ -53,7 +56,7 @@ if [ -n "${AGNDC_SMOKE:-}" ]; then
     # the training data is generated in the background meanwhile, for the next call
     if ! alive "$genpid"; then
         setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
-            -n "${AGNDC_SAMPLES:-5000}" --workers 14 >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
+            --wrinkled "$wrinkled" -n "${AGNDC_SAMPLES:-5000}" --workers 14 >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
         echo $! >"$genpid"
     fi
     rm -rf /tmp/agndc_smoke
@@ -110,8 +113,8 @@ for name in $names; do
 done
 if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     while alive "$genpid"; do sleep 2; done
-    agndc train-data -o "$train" --resolutions "$resolutions" -n "${AGNDC_SAMPLES:-5000}" \
-        --workers 16 2>/dev/null
+    agndc train-data -o "$train" --resolutions "$resolutions" --wrinkled "$wrinkled" \
+        -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
     echo "data ready after $(( $(date +%s) - start )) s: $(ls "$train" | wc -l) samples"
     while read -r name own; do
         # word splitting of the study line's options is intended (no quoting inside a line)
