@@ -5,8 +5,10 @@
 # shards; a finished stage is skipped):
 #   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] [undc] > lineage.log 2>&1 &
 # Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100, +100);
-# stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets. Pause it for a
-# benchmark with kill -STOP / kill -CONT on the `agndc train` process.
+# stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets; stage 3: the
+# shipped AGNDC (better than stages 1-2 on the validation family) continued 6,000 steps on 900
+# new shapes with --wrinkled 0.5 (DATA_wrinkled; docs/experiments/wrinkled-training.md). Pause it
+# for a benchmark with kill -STOP / kill -CONT on the `agndc train` process.
 # With a third argument `undc`: the lineage's UNDC twin instead (the same data, steps, seeds and
 # curriculum), the baseline of the AGNDC-against-UNDC comparison in docs/training.md.
 set -euo pipefail
@@ -39,3 +41,11 @@ fi
 stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets --val-steps 3000
 stage dt_agndc16_cont --init "$runs/bt_agndc16_long/step-003000.safetensors" --lr 5e-4 --seed 6 \
     --steps 2400,0,0
+wrinkled="${data}_wrinkled"
+if [[ ! -f "$wrinkled/.done" ]]; then
+    .venv/bin/agndc train-data -o "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5 --workers 1 \
+        && touch "$wrinkled/.done"
+fi
+stage wr_agndc16 --data "$wrinkled" --init agndc_core/weights/agndc.safetensors \
+    --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
+    --lr 2e-4 --ema 0.99 --seed 7 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
