@@ -36,6 +36,7 @@ from .shapes import (
     _bounds,
     _drop_slivers,
     _edge_manifold,
+    _random_rotation,
     _revolve,
     _rounded_rect,
     _smooth_curve,
@@ -328,22 +329,12 @@ def _tilt(rng) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
 
 
-def _uniform_rotation(rng) -> np.ndarray:
-    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-    q = q * np.sign(np.diag(r))
-    if np.linalg.det(q) < 0:
-        q[:, 0] = -q[:, 0]
-    return q
-
-
 def _place(m: Manifold, rng, kind: str) -> Manifold:
     """A signed axis permutation, then (CAD and printed: all but ``ALIGNED_SHARE``) a 1-15°
     tilt, or (organic) a uniform rotation."""
-    perm = np.eye(3)[rng.permutation(3)] * rng.choice([-1.0, 1.0], 3)
-    if np.linalg.det(perm) < 0:
-        perm[2] = -perm[2]
+    perm = _random_rotation(rng, aligned=True)
     if kind == "organic":
-        turn = _uniform_rotation(rng)
+        turn = _random_rotation(rng, aligned=False)
     else:
         turn = np.eye(3) if rng.random() < ALIGNED_SHARE else _tilt(rng)
     affine = np.zeros((3, 4))
