@@ -37,7 +37,6 @@ winding once, after the world mapping, for every method.
 from __future__ import annotations
 
 import math
-import os
 import sys
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -111,9 +110,10 @@ def expected_stages(options: RemeshOptions, *, crossings: float, points: float,
             source bounds (``VoxelGrid.source_bounds``: a voxelised mesh).
     """
     from .plan import stage_seconds
+    from .runtime.parallel import default_threads
 
     method = options.method
-    threads = options.threads or os.cpu_count() or 1
+    threads = options.threads or default_threads()  # what the network will run on
     if method in ("mc", "mc_taubin"):
         names = ["marching cubes"] + (["taubin smoothing"] if method == "mc_taubin" else [])
     else:
