@@ -60,6 +60,8 @@ from .voxelize import (
     inside_from_crossings,
     lattice_crossings,
     ray_jitter,
+    triangle_chunks,
+    triangle_cross,
 )
 
 SAMPLES_PER_CELL = 4  # samples along one side of a finest-scale cell: 16 per cell of flat surface
@@ -189,11 +191,9 @@ def sample_chunks(vertices, faces, spacing: float, check=None):
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     per_triangle = np.empty(len(faces), dtype=np.int64)
-    for lo in range(0, len(faces), TRIANGLE_CHUNK):
-        if check is not None:
-            check()
-        _, _, count, steps = _triangle_layout(vertices[faces[lo:lo + TRIANGLE_CHUNK]], spacing)
-        per_triangle[lo:lo + TRIANGLE_CHUNK] = count + steps.sum(axis=1)
+    for lo, triangles in triangle_chunks(vertices, faces, check):
+        _, _, count, steps = _triangle_layout(triangles, spacing)
+        per_triangle[lo:lo + len(triangles)] = count + steps.sum(axis=1)
     for lo, hi in chunk_runs(per_triangle, SAMPLE_CHUNK, TRIANGLE_CHUNK):
         if check is not None:
             check()
@@ -203,7 +203,7 @@ def sample_chunks(vertices, faces, spacing: float, check=None):
 def _triangle_layout(triangles, spacing):
     """Per triangle: unit normal (F, 3), area (F,), interior samples (F,) and samples along
     each of its edges (F, 3); degenerate triangles get no samples at all."""
-    cross = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    cross = triangle_cross(triangles)
     area2 = np.linalg.norm(cross, axis=1)
     keep = area2 > 1e-12
     normal = cross / np.where(keep, area2, 1.0)[:, None]
@@ -327,7 +327,7 @@ def _crossing_samples(frame_vertices, faces, crossings, check=None):
             points[:, axis] = crossing.depth[part]
             points += jitter
             triangles = frame_vertices[faces[crossing.triangle[part]]]
-            normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+            normals = triangle_cross(triangles)
             normals /= np.linalg.norm(normals, axis=1, keepdims=True)
             for step_b in (0, 1):
                 for step_c in (0, 1):

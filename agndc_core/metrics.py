@@ -26,7 +26,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .errors import MeshError
-from .voxelize import TRIANGLE_CHUNK
+from .voxelize import triangle_chunks, triangle_cross
 
 #: points sampled on each surface; the paper's protocol (its sampling noise alone gives
 #: CD ~ 0.9e-5 between two samplings of one mesh, so fewer points would blur the table)
@@ -93,11 +93,8 @@ def sample_surface(vertices, faces, n: int, rng, check=None) -> tuple[np.ndarray
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     area2 = np.empty(len(faces))  # (F,) twice the area
-    for lo in range(0, len(faces), TRIANGLE_CHUNK):
-        if check is not None:
-            check()
-        area2[lo:lo + TRIANGLE_CHUNK] = np.linalg.norm(
-            _cross(vertices[faces[lo:lo + TRIANGLE_CHUNK]]), axis=1)
+    for lo, triangles in triangle_chunks(vertices, faces, check):
+        area2[lo:lo + len(triangles)] = np.linalg.norm(triangle_cross(triangles), axis=1)
     total = area2.sum()
     if len(area2) == 0 or not np.isfinite(total) or total <= 0:
         raise MeshError("cannot sample a surface without any face of positive area")
@@ -113,13 +110,8 @@ def sample_surface(vertices, faces, n: int, rng, check=None) -> tuple[np.ndarray
     uv[flip] = 1 - uv[flip]
     t = vertices[faces[idx]]  # (n, 3, 3)
     points = t[:, 0] + uv[:, :1] * (t[:, 1] - t[:, 0]) + uv[:, 1:] * (t[:, 2] - t[:, 0])
-    normals = _cross(t) / area2[idx, None]
+    normals = triangle_cross(t) / area2[idx, None]
     return points, normals
-
-
-def _cross(triangles: np.ndarray) -> np.ndarray:
-    """(F, 3) cross product of each triangle's two edges from its first corner."""
-    return np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
 
 
 def edge_points(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
@@ -191,10 +183,8 @@ def _has_area(vertices: np.ndarray, faces: np.ndarray, check=None) -> bool:
     each chunk of ``TRIANGLE_CHUNK`` triangles)."""
     if len(faces) == 0 or not np.all(np.isfinite(vertices)):
         return False
-    for lo in range(0, len(faces), TRIANGLE_CHUNK):
-        if check is not None:
-            check()
-        if np.linalg.norm(_cross(vertices[faces[lo:lo + TRIANGLE_CHUNK]]), axis=1).max() > 0:
+    for _, triangles in triangle_chunks(vertices, faces, check):
+        if np.linalg.norm(triangle_cross(triangles), axis=1).max() > 0:
             return True
     return False
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from .errors import MeshError
 from .grid import MAX_VOXELS
-from .voxelize import TRIANGLE_CHUNK, grid_layout
+from .voxelize import grid_layout, triangle_chunks, triangle_cross
 
 #: ``voxelize``'s limits on ``resolution`` (voxels along the longest side, one empty voxel of
 #: margin on each side); tests/core/test_plan.py checks that voxelize agrees
@@ -177,12 +177,8 @@ def mesh_crossings(vertices, faces, voxel_size: float, check=None) -> float:
     faces = np.asarray(faces, dtype=np.int64)
     # (F, 3): twice the area times the unit normal
     cross = np.empty((len(faces), 3))
-    for lo in range(0, len(faces), TRIANGLE_CHUNK):
-        if check is not None:
-            check()
-        triangles = vertices[faces[lo:lo + TRIANGLE_CHUNK]]
-        cross[lo:lo + TRIANGLE_CHUNK] = np.cross(triangles[:, 1] - triangles[:, 0],
-                                                 triangles[:, 2] - triangles[:, 0])
+    for lo, triangles in triangle_chunks(vertices, faces, check):
+        cross[lo:lo + len(triangles)] = triangle_cross(triangles)
     return area_crossings(cross / 2.0, voxel_size)
 
 
@@ -298,8 +294,7 @@ def nearest_face_values(vertices, faces, values, points, *, samples: int = 200_0
     from scipy.spatial import cKDTree
 
     triangles = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0],
-                                   triangles[:, 2] - triangles[:, 0]), axis=1)  # (F,) 2x area
+    area = np.linalg.norm(triangle_cross(triangles), axis=1)  # (F,) 2x area
     rng = np.random.default_rng(seed)
     owner = np.arange(len(triangles))
     if area.sum() > 0 and samples > 0:

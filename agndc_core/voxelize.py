@@ -169,6 +169,22 @@ class Crossings:
 TRIANGLE_CHUNK = 1 << 18
 
 
+def triangle_chunks(vertices, faces, check=None):
+    """Yields (first face index, (n, 3, 3) triangles) of consecutive chunks of
+    ``TRIANGLE_CHUNK`` faces, ``check()`` before each: every per-triangle pass over a dense
+    mesh (ray set-up, areas, crossings, samples) goes through this, so Esc is honoured inside."""
+    for lo in range(0, len(faces), TRIANGLE_CHUNK):
+        if check is not None:
+            check()
+        yield lo, vertices[faces[lo:lo + TRIANGLE_CHUNK]]
+
+
+def triangle_cross(triangles: np.ndarray) -> np.ndarray:
+    """(F, 3) cross product of each triangle's two edges from its first corner: the normal
+    times twice the area."""
+    return np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+
+
 def lattice_crossings(vertices_vx3, faces_fx3, dims, check=None) -> list[Crossings]:
     """Every crossing of the mesh by the rays of the lattice columns along x, y and z.
 
@@ -189,12 +205,9 @@ def _column_ranges(vertices, faces, dims, check=None):
     limit = np.asarray(dims)
     low = np.empty((len(faces), 3), dtype=np.int32)
     high = np.empty((len(faces), 3), dtype=np.int32)
-    for lo in range(0, len(faces), TRIANGLE_CHUNK):
-        if check is not None:
-            check()
-        triangles = vertices[faces[lo:lo + TRIANGLE_CHUNK]]
-        low[lo:lo + TRIANGLE_CHUNK] = np.clip(np.ceil(triangles.min(axis=1)), 0, limit)
-        high[lo:lo + TRIANGLE_CHUNK] = np.clip(np.floor(triangles.max(axis=1)), -1, limit - 1)
+    for lo, triangles in triangle_chunks(vertices, faces, check):
+        low[lo:lo + len(triangles)] = np.clip(np.ceil(triangles.min(axis=1)), 0, limit)
+        high[lo:lo + len(triangles)] = np.clip(np.floor(triangles.max(axis=1)), -1, limit - 1)
     return low, high
 
 

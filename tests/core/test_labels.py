@@ -185,12 +185,14 @@ def test_surface_samples_in_chunks_are_the_same_arrays(monkeypatch):
     """Sharp's samples are made in chunks of triangles (a check before each): any chunk size
     gives the same points and normals in the same order."""
     from agndc_core import labels
+    from agndc_core import voxelize as voxelize_module
 
     mesh = cylinder_with_hole()
     vertices = mesh.vertices * 30
     whole = labels.surface_samples(vertices, mesh.faces, 0.25)
     monkeypatch.setattr(labels, "SAMPLE_CHUNK", 333)
     monkeypatch.setattr(labels, "TRIANGLE_CHUNK", 100)
+    monkeypatch.setattr(voxelize_module, "TRIANGLE_CHUNK", 100)  # voxelize.triangle_chunks
     calls = []
     chunked = labels.surface_samples(vertices, mesh.faces, 0.25, check=lambda: calls.append(1))
     for a, b in zip(whole, chunked):
@@ -348,9 +350,10 @@ def test_cancel_inside_the_long_passes_stops_the_run(monkeypatch, where):
         seen = 0
 
         def is_set(self):
-            # the pass that checks: the first caller outside the stages' check
+            # the pass that checks: the first caller outside the stages' check and the shared
+            # chunking of triangles
             frame = sys._getframe(1)
-            while frame.f_code.co_name in ("raise_if_cancelled", "check"):
+            while frame.f_code.co_name in ("raise_if_cancelled", "check", "triangle_chunks"):
                 frame = frame.f_back
             self.seen += frame.f_code.co_name == where
             return self.seen >= 2

@@ -14,6 +14,7 @@ import pytest
 import trimesh
 
 from agndc_core import metrics as M
+from agndc_core import voxelize as voxelize_module
 from agndc_core.errors import MeshError
 
 N_FAST = 20_000  # samples where the spec's 100k is not under test
@@ -225,7 +226,7 @@ def test_chamfer_distance_alone_is_evaluates_cd_and_checks_between_steps(monkeyp
     pred = trimesh.Trimesh(sphere.vertices * 0.9 + [offset, 0, 0], sphere.faces)
     full = M.evaluate(pred.vertices, pred.faces, cube.vertices, cube.faces, n_samples=N_FAST,
                       seed=3)
-    monkeypatch.setattr(M, "TRIANGLE_CHUNK", 100)
+    monkeypatch.setattr(voxelize_module, "TRIANGLE_CHUNK", 100)  # voxelize.triangle_chunks
     calls = []
     cd = M.chamfer_distance(pred.vertices, pred.faces, cube.vertices, cube.faces,
                             n_samples=N_FAST, seed=3, check=lambda: calls.append(1))

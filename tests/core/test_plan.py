@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agndc_core import plan
+from agndc_core import voxelize as voxelize_module
 from agndc_core.errors import MeshError
 from agndc_core.grid import MAX_VOXELS, pad_to_lattice
 from agndc_core.labels import crossed_edges
@@ -87,7 +88,7 @@ def test_crossings_estimate_in_chunks_checks_between_them(monkeypatch):
 
     vertices, faces = cad_part(7)
     whole = plan.mesh_crossings(vertices, faces, 0.02)
-    monkeypatch.setattr(plan, "TRIANGLE_CHUNK", 100)
+    monkeypatch.setattr(voxelize_module, "TRIANGLE_CHUNK", 100)  # voxelize.triangle_chunks
     calls = []
     assert plan.mesh_crossings(vertices, faces, 0.02, check=lambda: calls.append(1)) == whole
     assert len(calls) == -(-len(faces) // 100)
