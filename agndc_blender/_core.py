@@ -17,10 +17,14 @@ BASE = (f"{__package__}.agndc_core" if find_spec(f"{__package__}.agndc_core") is
         else "agndc_core")
 MODULES = ("checkpoint", "colors", "errors", "gridio", "labelmaps", "methods", "metrics",
            "options", "pipeline", "plan", "progress", "voxelize")
+#: modules of the core's subpackages, by the name the add-on imports them as
+SUBMODULES = {"parallel": "runtime.parallel"}
 
 def __getattr__(name):
     if name == "core":
         return importlib.import_module(BASE)
     if name in MODULES:
         return importlib.import_module(f"{BASE}.{name}")
+    if name in SUBMODULES:
+        return importlib.import_module(f"{BASE}.{SUBMODULES[name]}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -23,7 +23,6 @@ coloured by the nearest source voxel (``colors.face_colors``). ``remesh_object``
 
 from __future__ import annotations
 
-import os
 import threading
 import traceback
 import warnings
@@ -36,7 +35,7 @@ from mathutils import Matrix
 
 from . import mesh_io
 from ._core import checkpoint as checkpoint_module
-from ._core import colors, errors, gridio, labelmaps, metrics, pipeline, plan, voxelize
+from ._core import colors, errors, gridio, labelmaps, metrics, parallel, pipeline, plan, voxelize
 from ._core import methods as registry
 from ._core import options as options_module
 from ._core import progress as progress_module
@@ -115,7 +114,7 @@ def estimate_run(methods, shape, crossings: float, threads: int, distances: bool
     """Estimated seconds of one input's run (``plan.estimate_seconds`` per method) with the
     network's thread count (``resolve_threads``); with ``distances``, the Chamfer distance of
     each result to the source and one of the source to itself (its sampling noise)."""
-    count = resolve_threads(threads) or os.cpu_count() or 1
+    count = resolve_threads(threads) or parallel.default_threads()
     return sum(plan.estimate_seconds(method, shape, crossings, threads=count,
                                      distances=int(distances) * (2 if k == 0 else 1))
                for k, method in enumerate(methods))
@@ -444,7 +443,7 @@ def resolve_threads(threads: int) -> int | None:
         return threads
     if bpy.app.background:
         return None
-    return max(1, (os.cpu_count() or 2) - 1)
+    return max(1, parallel.default_threads() - 1)
 
 
 def compute_jobs(jobs: list[Job], settings: Settings, progress=None, cancel=None) -> None:

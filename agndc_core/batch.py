@@ -62,6 +62,7 @@ from .gridio import (
 from .labelmaps import check_grid_method, parse_labels
 from .options import RemeshOptions
 from .pipeline import CHECKPOINT_NAMES, METHODS
+from .runtime.parallel import default_threads
 
 CSV_NAME = "batch.csv"
 #: columns of batch.csv: label is the label value of a per-label output (else empty), grid the
@@ -196,13 +197,6 @@ def is_done(job: Job) -> bool:
     return outputs is not None and all(is_current(job.input, output) for output in outputs)
 
 
-def cpu_count() -> int:
-    """CPU cores this process may use (its affinity mask where the OS has one)."""
-    if hasattr(os, "sched_getaffinity"):
-        return len(os.sched_getaffinity(0))
-    return os.cpu_count() or 1
-
-
 # --- engines --------------------------------------------------------------------------------
 
 
@@ -221,7 +215,7 @@ def run_pool(jobs, options: RemeshOptions, workers: int, on_rows, func=run_job) 
     fresh process, so only the file that kills its worker gets a failed row. Ctrl-C terminates
     the workers (their temporary files are swept by ``remesh_many``) and propagates.
     """
-    threads = options.threads or max(1, cpu_count() // workers)
+    threads = options.threads or max(1, default_threads() // workers)
     todo, running = deque(jobs), {}
     pool = _new_pool(workers, options, threads)
     try:
@@ -387,7 +381,7 @@ def remesh_many(inputs, out_dir, options: RemeshOptions | None = None, *, fmt: s
     batch = RemeshOptions.of(options, **changes)
     if batch.checkpoint:  # absolute: workers may run in another folder or host
         batch = RemeshOptions.of(batch, checkpoint=os.path.abspath(batch.checkpoint))
-    workers = cpu_count() if workers is None else workers
+    workers = default_threads() if workers is None else workers
     _check_arguments(batch, fmt, workers, engine, scheduler)
     wanted = _wanted_labels(batch, per_label, labels)
     out_dir = Path(out_dir)

@@ -22,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from agndc_core.batch import cpu_count, remesh_many
+from agndc_core.batch import remesh_many
 from agndc_core.gridio import load_mesh
+from agndc_core.runtime.parallel import default_threads
 
 
 def make_grids(folder: Path, n: int, res: int) -> None:
@@ -82,7 +83,7 @@ def main() -> None:
                 worst = max(worst, float(np.abs(got_v - want_v).max()))
 
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
-    print(f"{args.n} grids at {args.res}^3, method {args.method}, {cpu_count()} cores, "
+    print(f"{args.n} grids at {args.res}^3, method {args.method}, {default_threads()} cores, "
           f"load average {load} (1, 5, 15 min)")
     base = results[0]["wall"]
     print(f"{'engine':<24} {'wall s':>7} {'files/s':>8} {'speed-up':>8} {'s/job':>6}  "
