@@ -129,19 +129,16 @@ def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def face_neighbours(incidence: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray]:
-    """The faces sharing at least one vertex with each face (itself excluded), as the rows of a
-    CSR matrix: ``indptr`` (F + 1,) and ``neighbours`` (P,) int32, from the (V, F)
-    ``vertex_faces`` incidence. The structure is built once and every normal pass refills only
-    its values: at 256³ P is ~10^7, and (P, 2) int64 pairs alone would be 160 MB."""
+    """The pairs of faces sharing at least one vertex, each pair once, in the row of its
+    lower-numbered face: CSR rows ``indptr`` (F + 1,) and ``neighbours`` (P,) int32 of the
+    faces j > i linked to each face i, from the (V, F) ``vertex_faces`` incidence. A pair's
+    weights are symmetric, so each normal pass computes them once for both faces (half the
+    gathers of storing both directions); the structure is built once and every pass refills
+    only its values: at 256³ P is ~5·10^6, and (P, 2) int64 pairs alone would be 80 MB."""
     counts = incidence.astype(np.int8)  # a face pair shares at most 3 vertices
-    linked = (counts.T @ counts).tocsr()  # faces linked through a shared vertex
-    n_faces = linked.shape[0]
-    rows = np.repeat(np.arange(n_faces, dtype=np.int32), np.diff(linked.indptr))
-    keep = linked.indices != rows
-    index_type = np.int32 if keep.sum() < np.iinfo(np.int32).max else np.int64
-    indptr = np.zeros(n_faces + 1, dtype=index_type)
-    np.cumsum(np.bincount(rows[keep], minlength=n_faces), out=indptr[1:])
-    return indptr, linked.indices[keep].astype(index_type)
+    linked = sp.triu(counts.T @ counts, k=1, format="csr")  # j > i, linked through a vertex
+    index_type = np.int32 if linked.nnz < np.iinfo(np.int32).max else np.int64
+    return linked.indptr.astype(index_type), linked.indices.astype(index_type)
 
 
 def vertex_faces(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
@@ -155,31 +152,32 @@ def bilateral_normals(normals, areas, centroids, neighbours, params: NormalFilte
     """``params.normal_iterations`` passes of bilateral averaging of face normals.
 
     Each pass: n_i <- normalise(a_i n_i + sum_j a_j W_s(|c_i - c_j|) W_r(|n_i - n_j|) n_j) over
-    the faces j sharing a vertex with i (``neighbours``: the (indptr, j) rows of
-    ``face_neighbours``), with Gaussian W_s of width the mean centroid distance of the
-    neighbours (scale-free) and W_r of width ``params.sigma_normal``.
+    the faces j sharing a vertex with i (``neighbours``: each pair once, as ``face_neighbours``
+    gives them), with Gaussian W_s of width the mean centroid distance of the neighbours
+    (scale-free) and W_r of width ``params.sigma_normal``. W_s W_r is symmetric: with G the
+    matrix of its pairs j > i, the sum is (G + G^T) (a n).
     """
     indptr, j = neighbours
     n_faces = len(normals)
     if len(j) == 0:
         return normals
     i = np.repeat(np.arange(n_faces, dtype=j.dtype), np.diff(indptr))  # (P,) row of each pair
-    # pair quantities are computed in chunks and in place (10^7 pairs at 256³: every (P,)
-    # float64 temporary is 80 MB, a (P, 3) one 240 MB)
+    # pair quantities are computed in chunks and in place (5·10^6 pairs at 256³: every (P,)
+    # float64 temporary is 40 MB, a (P, 3) one 120 MB)
     spatial = _pairwise(lambda a, b: _sq_norm(centroids[i[a:b]] - centroids[j[a:b]]), len(i))
     np.divide(spatial, -2.0 * np.mean(spatial), out=spatial)
     np.exp(spatial, out=spatial)
-    _in_chunks(len(j), lambda a, b: np.multiply(areas[j[a:b]], spatial[a:b], out=spatial[a:b]))
-    weights = sp.csr_matrix((np.empty(len(j)), j, indptr), shape=(n_faces, n_faces))
+    upper = sp.csr_matrix((np.empty(len(j)), j, indptr), shape=(n_faces, n_faces))  # G
     for _ in range(params.normal_iterations):
         if check is not None:
             check()
         agreement = _pairwise(lambda a, b, n=normals: _sq_norm(n[i[a:b]] - n[j[a:b]]), len(i),
-                              out=weights.data)
+                              out=upper.data)
         np.divide(agreement, -2.0 * params.sigma_normal ** 2, out=agreement)
         np.exp(agreement, out=agreement)
         agreement *= spatial
-        summed = areas[:, None] * normals + weights @ normals  # (F, 3)
+        weighted = areas[:, None] * normals  # (F, 3)
+        summed = weighted + upper @ weighted + upper.T @ weighted  # (F, 3)
         length = np.sqrt(_dot(summed, summed))[:, None]
         normals = np.divide(summed, length, out=np.zeros_like(summed), where=length > 0)
     return normals
