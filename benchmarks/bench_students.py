@@ -32,6 +32,13 @@ STUDENTS = {
     "w8plain": dict(width=8, use_snake=False, use_attention=False),
     "w8plain_r2": dict(width=8, use_snake=False, use_attention=False, band_radius=2),
     "w12plain_r3": dict(width=12, use_snake=False, use_attention=False, band_radius=3),
+    # plain, and each scale adds its DFFM output to the up-sampled coarser prediction (no CRPM)
+    "plain_nocrpm": dict(use_snake=False, use_attention=False, use_crpm=False),
+    # plain, and each scale adds the up-sampled coarser prediction unfused (no DFFM, no CRPM)
+    "plain_nofuse": dict(use_snake=False, use_attention=False, use_dffm=False, use_crpm=False),
+    # one scale of plain convolutions: the UNDC architecture (agndc_core/weights/undc.json)
+    "undc": dict(levels=0, use_snake=False, use_attention=False, use_dffm=False,
+                 use_crpm=False, surface_nets_prior=True),
 }
 
 
