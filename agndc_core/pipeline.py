@@ -100,20 +100,14 @@ class RemeshResult:
         return quad_mesh(self, **options)
 
 
-def expected_stages(options: RemeshOptions, *, crossings: float, points: float,
-                    bounded: bool = False) -> dict[str, float]:
-    """{stage: expected seconds} of ``remesh`` with ``options``, in the order it runs them
-    (``plan.stage_seconds``): the spans of its progress bar (``progress.Stages``).
+def planned_stages(options: RemeshOptions, *, bounded: bool = False) -> list[str]:
+    """The stages ``remesh`` runs with ``options``, in order: the one list that the run itself
+    and its progress bar's plan (``expected_stages``) both read.
 
     Args:
-        crossings, points: the lattice's crossed edges and points; bounded: the grid has
-            source bounds (``VoxelGrid.source_bounds``: a voxelised mesh).
+        bounded: the grid has source bounds (``VoxelGrid.source_bounds``: a voxelised mesh).
     """
-    from .plan import stage_seconds
-    from .runtime.parallel import default_threads
-
     method = options.method
-    threads = options.threads or default_threads()  # what the network will run on
     if method in ("mc", "mc_taubin"):
         names = ["marching cubes"] + (["taubin smoothing"] if method == "mc_taubin" else [])
     else:
@@ -129,8 +123,26 @@ def expected_stages(options: RemeshOptions, *, crossings: float, points: float,
             names += (["normal filter"] if options.normal_filter else []) + ["fold check"]
     if options.low_poly:
         names.append("low poly")
-    return {name: stage_seconds(name, method=method, crossings=crossings, points=points,
-                                threads=threads) for name in names}
+    return names
+
+
+def expected_stages(options: RemeshOptions, *, crossings: float, points: float,
+                    bounded: bool = False) -> dict[str, float]:
+    """{stage: expected seconds} of ``remesh`` with ``options``, in the order it runs them
+    (``planned_stages``, ``plan.stage_seconds``): the spans of its progress bar
+    (``progress.Stages``).
+
+    Args:
+        crossings, points: the lattice's crossed edges and points; bounded: the grid has
+            source bounds (``VoxelGrid.source_bounds``: a voxelised mesh).
+    """
+    from .plan import stage_seconds
+    from .runtime.parallel import default_threads
+
+    threads = options.threads or default_threads()  # what the network will run on
+    return {name: stage_seconds(name, method=options.method, crossings=crossings,
+                                points=points, threads=threads)
+            for name in planned_stages(options, bounded=bounded)}
 
 
 def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=None,
@@ -159,7 +171,6 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
     """
     opts = RemeshOptions.of(options, **changes)
     method, checkpoint, threads, device = opts.method, opts.checkpoint, opts.threads, opts.device
-    flat_patches, normal_filter = opts.flat_patches, opts.normal_filter
     min_component_faces, tile = opts.min_component_faces, opts.tile
     decimate_error, target_faces = opts.decimate_error, opts.target_faces
     if not isinstance(grid, VoxelGrid):
@@ -167,8 +178,9 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
     if method not in METHODS:
         raise AGNDCError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     grid.check_not_trivial()
-    low_poly = opts.low_poly
-    if low_poly:
+    bounded = grid.source_bounds is not None
+    planned = planned_stages(opts, bounded=bounded)  # the stages below run exactly these
+    if "low poly" in planned:
         from .decimate import check_options
 
         check_options(decimate_error, target_faces)  # before the long stages, not after
@@ -178,7 +190,7 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
 
         expected = expected_stages(opts, crossings=grid_crossings(grid.occupancy),
                                    points=lattice_points(grid.shape),
-                                   bounded=grid.source_bounds is not None)
+                                   bounded=bounded)
     stages = Stages(progress, cancel, expected)
     face_quads = None
     if method in ("mc", "mc_taubin"):
@@ -186,31 +198,31 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
 
         lattice = pad_to_lattice(grid.occupancy, levels=0)
         vertices, faces = stages.run("marching cubes", marching_cubes_lattice, lattice)
-        if method == "mc_taubin":
+        if "taubin smoothing" in planned:
             vertices = stages.run("taubin smoothing", taubin_smooth, vertices, faces)
     else:
         lattice = pad_to_lattice(grid.occupancy)
-        if method == "surfacenets":
+        if planned[0] == "surface nets":
             from .surfacenets import surface_nets_lattice
 
             vertex = stages.run("surface nets", surface_nets_lattice, lattice)
         else:
             # a network's vertices, or (mesh-only methods) those of the exact intersections
-            name = "predict" if method in CHECKPOINT_NAMES else "intersection vertices"
+            name = planned[0]  # "predict" or "intersection vertices"
             vertex = stages.run(name, _predict, method, lattice, labels, checkpoint, threads,
                                 device, tile, stages.sub(name), cancel, reframe)
         # where the flat-patch and bounds stages place a coordinate, the normal filter keeps it
-        filtered = normal_filter and method in CHECKPOINT_NAMES  # a network's mesh
+        filtered = "normal filter" in planned  # a network's mesh
         pinned = np.zeros(vertex.shape, dtype=bool) if filtered else None
-        if method in CHECKPOINT_NAMES and flat_patches:  # a network's vertices
+        if "flat patches" in planned:  # a network's vertices
             from .flatpatches import fit_terraced_planes, flatten_patches
 
             vertex = stages.run("flat patches", flatten_patches, lattice, vertex,
                                 in_place=True, pinned=pinned)
-            if TERRACED_PLANES:
+            if "terraced planes" in planned:
                 vertex = stages.run("terraced planes", fit_terraced_planes, lattice, vertex,
                                     in_place=True, pinned=pinned)
-        if opts.source_bounds and method in BOUNDED_METHODS and grid.source_bounds is not None:
+        if "source bounds" in planned:
             vertex = stages.run("source bounds", _snap_to_source_bounds, grid, lattice, vertex,
                                 pinned)
         edge = crossed_edges(lattice)
@@ -221,10 +233,10 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
         if filtered:
             vertices = stages.run("normal filter", filter_contoured_mesh, vertices, faces,
                                   vertex, pinned, check=stages.check)
-        if method in CHECKPOINT_NAMES:  # a network's vertices: no component turned inside out
+        if "fold check" in planned:  # a network's vertices: no component turned inside out
             vertices = stages.run("fold check", unfold_components, vertices, faces, lattice,
                                   edge, min_component_faces, check=stages.check)
-    if low_poly:
+    if "low poly" in planned:
         from .decimate import decimate
 
         # lattice coordinates: one unit is one voxel along each axis
