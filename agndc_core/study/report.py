@@ -331,9 +331,11 @@ def _inference_threads() -> int:
 
 # -- picture ----------------------------------------------------------------------------------
 
-def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS) -> bool:
+def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS,
+                  colours: int | None = None) -> bool:
     """A grid of renders: one row per named shape, one column per (title, method, options) of
-    ``columns`` (method None: the ground truth). False if none.
+    ``columns`` (method None: the ground truth). False if none. With ``colours``, written as a
+    palette PNG of that many colours (``save_small_png``).
 
     ``names`` are file stems of ``meshes`` or ``ROTATED_BOX``; names found nowhere are skipped.
     """
@@ -363,7 +365,10 @@ def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS)
             title = title if row == 0 else ""
             ax.set_title(f"{title}\n{name} ({category})" if col == 0 else title)
     fig.subplots_adjust(left=0, right=1, bottom=0, top=0.95, wspace=0, hspace=0.05)
-    fig.savefig(path)
+    if colours is None:
+        fig.savefig(path)
+    else:
+        save_small_png(fig, path, colours)
     plt.close(fig)
     return True
 
