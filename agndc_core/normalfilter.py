@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .voxelize import triangle_cross
+
 
 @dataclass(frozen=True)
 class NormalFilter:
@@ -77,7 +79,7 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
     """Unit normals (F, 3), areas (F,) and centroids (F, 3) of the faces (a zero-area face
     gets a zero normal, so it neither pulls on its neighbours nor moves its vertices)."""
-    cross = _face_cross(vertices, faces)  # (F, 3)
+    cross = triangle_cross(vertices[faces])  # (F, 3)
     length = np.sqrt(_dot(cross, cross))
     normals = np.divide(cross, length[:, None], out=np.zeros_like(cross),
                         where=length[:, None] > 0)
@@ -88,13 +90,6 @@ def face_centroids(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(F, 3) centroids of the faces."""
     a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]  # (F, 3)
     return (a + b + c) / 3.0
-
-
-def _face_cross(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F, 3) cross product of each face's two edges from its first corner: the normal times
-    twice the area, pointing the way the face winds."""
-    a = vertices[faces[:, 0]]
-    return np.cross(vertices[faces[:, 1]] - a, vertices[faces[:, 2]] - a)
 
 
 #: face pairs per chunk of the pairwise distances
@@ -217,7 +212,7 @@ def keep_orientation(before, after, faces, original_normals) -> np.ndarray:
     size). Terminates: at worst every vertex returns to ``before``, which folded nothing."""
     after = after.copy()
     while True:
-        turned = _dot(_face_cross(after, faces), original_normals) < 0  # (F,)
+        turned = _dot(triangle_cross(after[faces]), original_normals) < 0  # (F,)
         back = np.unique(faces[turned])
         back = back[np.any(after[back] != before[back], axis=1)]
         if len(back) == 0:
