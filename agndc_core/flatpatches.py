@@ -4,11 +4,14 @@ Where a binary grid shows a flat voxel face (a patch of cells whose corners all 
 way along one axis), it says nothing about where the face lies inside its layer of cells: every
 depth leaves the same voxels. A network's coordinate along that axis then varies from cell to
 cell by its own noise, and a flat face comes back crumpled. ``flatten_patches`` gives every
-cell of such a patch the patch's mean coordinate along the axis: the face is exactly flat, at
-the depth the network estimated on average. On the dev meshes at 64³ that beats the layer's
-midpoint (the network reads where faces lie from the shape around them); at 128³ the midpoint
-is slightly better, a gap for training on larger shapes to close
-(docs/experiments/flat-patches.md).
+cell of such a patch one coordinate along the axis, so the face is exactly flat:
+
+- on the shape's **outermost layer** along the axis (a face that bounds the shape), the mean of
+  the network's coordinates: the voxeliser frames a mesh's bounding box, so where those faces
+  lie in their layer follows from the frame, and the network has learned it;
+- **inside the shape's extent**, the layer's midpoint: where such a face lies in its layer is
+  uniform over the layer for all the grid can tell, the midpoint is the best guess under that,
+  and the network's mean was measured farther off (docs/experiments/flat-patches.md).
 
 A **patch** is a set of cells in one layer, connected through shared cell faces within the
 layer, each a **pure split** along the axis: its four lower corners are inside and its four
@@ -48,6 +51,9 @@ KINDS = (True, False)
 #: layers of cells flattened together (memory: a few bytes per cell of a slab)
 SLAB_LAYERS = 32
 
+#: a flat face inside the shape's extent goes to the middle of its layer of cells
+MIDPOINT = 0.5
+
 #: connectivity within a layer: the 4 cells sharing a face with a cell, in the two in-plane axes
 #: (the last axis is the split axis after ``np.moveaxis``)
 _IN_PLANE = np.zeros((3, 3, 3), dtype=bool)
@@ -69,11 +75,13 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
 
     Returns:
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
-        share one coordinate along the patch's axis (the mean of theirs); nothing else changes.
+        share one coordinate along the patch's axis: the mean of theirs on the shape's
+        outermost layers (``outer_cell_layers``), ``MIDPOINT`` elsewhere; nothing else changes.
     """
     lattice = np.asarray(lattice, dtype=bool)
     out = vertex if in_place else np.array(vertex, copy=True)
     for axis in range(3):
+        by_mean = mean_depth_layers(lattice, axis)
         points = np.moveaxis(lattice, axis, -1)  # split axis last
         # (X-1, Y-1, Z-1) view of the cells' coordinate along axis, split axis last
         coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
@@ -86,17 +94,38 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
             lo, hi = max(first - 1, 0), min(last + 1, layers)
             for lower_inside in KINDS:
                 _flatten_slab(points[..., lo:hi + 1], coord[..., lo:hi], lower_inside,
-                              range(first - lo, last - lo),
+                              range(first - lo, last - lo), by_mean[lower_inside][lo:hi],
                               None if pin is None else pin[..., lo:hi])
     return out
 
 
-def _flatten_slab(points, coord, lower_inside: bool, written: range, pin=None) -> None:
+def outer_cell_layers(lattice: np.ndarray, axis: int) -> dict[bool, int]:
+    """{lower_inside: cell layer along ``axis``} of the shape's two outermost faces: the layer
+    above the last occupied layer of points holds the faces whose lower corners are inside
+    (True), the layer below the first occupied one the faces whose upper corners are (False);
+    -1 on both for an empty lattice."""
+    occupied = np.flatnonzero(lattice.any(axis=tuple(a for a in range(3) if a != axis)))
+    if len(occupied) == 0:
+        return {True: -1, False: -1}
+    return {True: int(occupied[-1]), False: int(occupied[0]) - 1}
+
+
+def mean_depth_layers(lattice: np.ndarray, axis: int) -> dict[bool, np.ndarray]:
+    """{lower_inside: (cell layers along ``axis``,) bool}: the layers whose flat patches of
+    that kind take the network's mean depth, the shape's outermost one on each side
+    (``outer_cell_layers``); the patches of every other layer go to ``MIDPOINT``."""
+    layers = np.arange(lattice.shape[axis] - 1)
+    return {kind: layers == layer for kind, layer in outer_cell_layers(lattice, axis).items()}
+
+
+def _flatten_slab(points, coord, lower_inside: bool, written: range, by_mean: np.ndarray,
+                  pin=None) -> None:
     """Flatten the patches of one kind in ``written`` layers of a slab, in place.
 
     points: (A, B, L + 1) bool lattice points of the slab, split axis last; coord: (A - 1,
-    B - 1, L) float view of its cells' coordinate along the split axis; pin: None or a bool
-    view of coord's shape, set where coord is written."""
+    B - 1, L) float view of its cells' coordinate along the split axis; by_mean: (L,) bool,
+    the slab's layers whose patches take their mean (``mean_depth_layers``; the others
+    ``MIDPOINT``); pin: None or a bool view of coord's shape, set where coord is written."""
     split = _pure_splits_last(points, lower_inside)
     patches, count = ndimage.label(split, _IN_PLANE)
     if count == 0:
@@ -108,9 +137,10 @@ def _flatten_slab(points, coord, lower_inside: bool, written: range, pin=None) -
     mean = np.bincount(patch_of, weights=coord[cells], minlength=count + 1) / np.maximum(size, 1)
     keep = ~terrace_patches(split, patches, count)[patch_of]
     keep &= (cells[2] >= written.start) & (cells[2] < written.stop)  # halo layers: not ours
-    coord[tuple(c[keep] for c in cells)] = mean[patch_of[keep]]
+    cells = tuple(c[keep] for c in cells)
+    coord[cells] = np.where(by_mean[cells[2]], mean[patch_of[keep]], MIDPOINT)
     if pin is not None:
-        pin[tuple(c[keep] for c in cells)] = True
+        pin[cells] = True
 
 
 def snap_to_bounds(lattice: np.ndarray, vertex: np.ndarray, bounds, *,
@@ -193,13 +223,11 @@ def outermost_layers(lattice: np.ndarray, bounds):
     plane sits at ``local`` (in [0, 1]) from the layer's lower points."""
     bounds = np.asarray(bounds, dtype=np.float64).reshape(2, 3)
     for axis in range(3):
-        occupied = np.flatnonzero(lattice.any(axis=tuple(a for a in range(3) if a != axis)))
-        if len(occupied) == 0:
-            return
-        # the max side: cells between the last occupied layer of points and the empty one above;
-        # the min side: cells between the empty layer below the first occupied one and it
-        for lower_inside, layer, plane in ((True, occupied[-1], bounds[1, axis]),
-                                           (False, occupied[0] - 1, bounds[0, axis])):
+        outer = outer_cell_layers(lattice, axis)
+        if outer[True] < 0:
+            return  # an empty lattice
+        for lower_inside, layer, plane in ((True, outer[True], bounds[1, axis]),
+                                           (False, outer[False], bounds[0, axis])):
             local = plane - layer
             if 0 <= layer < lattice.shape[axis] - 1 \
                     and -tol.cell_slack <= local <= 1 + tol.cell_slack:
@@ -240,10 +268,16 @@ def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray
     lattice = np.asarray(lattice, dtype=bool)
     out = np.array(vertex, dtype=np.float64, copy=True)
     for axis, lower_inside in itertools.product(range(3), KINDS):
+        occupied = [k for k in range(lattice.shape[axis])
+                    if np.take(lattice, k, axis=axis).any()]
+        outer = (occupied[-1] if lower_inside else occupied[0] - 1) if occupied else -1
         for patch in _patches_naive(lattice, axis, lower_inside):
-            mean = np.mean([vertex[cell][axis] for cell in patch])
+            if patch[0][axis] == outer:  # a face that bounds the shape
+                value = np.mean([vertex[cell][axis] for cell in patch])
+            else:
+                value = MIDPOINT
             for cell in patch:
-                out[cell][axis] = mean
+                out[cell][axis] = value
     return out
 
 

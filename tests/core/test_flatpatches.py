@@ -1,5 +1,6 @@
 """Flat patches (fast against naive) and the invariants they promise: flat voxel faces come out
-exactly flat at the mean depth, terraces and everything else are left alone; then the same
+exactly flat, at the network's mean depth on the shape's outermost layers and mid-layer inside
+its extent, terraces and everything else are left alone; then the same
 through ``pipeline.remesh`` with the shipped network. Then the source bounds: the faces that
 bound a voxelised mesh land on its bounding box, and nothing lies beyond it."""
 
@@ -120,7 +121,11 @@ def test_a_step_of_two_layers_is_no_terrace():
     out = flatten_patches(lattice, vertex)
     plateau, strip = out[8:21, 2:21, 9, 2], out[2:7, 2:21, 11, 2]
     assert np.ptp(plateau) == 0.0 and np.ptp(strip) == 0.0
-    assert plateau[0, 0] == pytest.approx(vertex[8:21, 2:21, 9, 2].mean(), abs=1e-6)
+    # the strip bounds the shape (its outermost layer along z): the network's mean depth; the
+    # plateau lies inside the shape's extent: the middle of its layer
+    assert strip[0, 0] == pytest.approx(vertex[2:7, 2:21, 11, 2].mean(), abs=1e-6)
+    assert plateau[0, 0] == flatpatches.MIDPOINT
+    assert vertex[8:21, 2:21, 9, 2].mean() != pytest.approx(flatpatches.MIDPOINT, abs=1e-3)
     # one layer instead of two is a terrace within reach: the plateau keeps its raw values
     lattice[2:8, 2:22, 11] = False
     out = flatten_patches(lattice, vertex)

@@ -1,0 +1,58 @@
+"""Where a flat patch goes in its layer: the network's mean depth, the layer's midpoint, or both.
+
+``flatpatches.mean_depth_layers`` decides which layers' flat patches take the network's mean
+depth; the others go to the middle of their layer. This study scores ``agndc eval`` with that
+rule replaced:
+
+* ``shipped``: the mean on the shape's outermost layer on each side, the midpoint inside;
+* ``mean``: the mean everywhere (the stage before the rule);
+* ``midpoint``: the midpoint everywhere;
+* ``outer-midpoint``: the reverse of the shipped rule.
+
+    .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
+    .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
+
+docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint") has the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("data", help="folder of meshes (agndc val-data)")
+    parser.add_argument("-o", "--out", required=True)
+    parser.add_argument("--depth", default="shipped",
+                        choices=["shipped", "mean", "midpoint", "outer-midpoint"])
+    parser.add_argument("--methods", default="agndc")
+    parser.add_argument("--res", type=int, default=64)
+    parser.add_argument("--shifts", type=int, default=0)
+    parser.add_argument("--samples", type=int, default=30_000)
+    args = parser.parse_args()
+
+    from agndc_core import flatpatches
+    from agndc_core.cli import main as agndc
+
+    shipped = flatpatches.mean_depth_layers
+
+    def replaced(lattice, axis):
+        layers = shipped(lattice, axis)
+        if args.depth == "mean":
+            return {kind: np.ones_like(by_mean) for kind, by_mean in layers.items()}
+        if args.depth == "midpoint":
+            return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
+        if args.depth == "outer-midpoint":
+            return {kind: ~by_mean for kind, by_mean in layers.items()}
+        return layers
+
+    flatpatches.mean_depth_layers = replaced  # flatten_patches looks it up on every call
+    agndc(["eval", args.data, "--methods", args.methods, "--res", str(args.res), "--samples",
+           str(args.samples), "--shifts", str(args.shifts), "-o", args.out])
+
+
+if __name__ == "__main__":
+    main()
