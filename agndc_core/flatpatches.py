@@ -75,8 +75,9 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
 
     Returns:
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
-        share one coordinate along the patch's axis: the mean of theirs on the shape's
-        outermost layers (``outer_cell_layers``), ``MIDPOINT`` elsewhere; nothing else changes.
+        share one coordinate along the patch's axis: the mean of theirs on the layers
+        ``mean_depth_layers`` names (the shape's outermost), ``MIDPOINT`` elsewhere; nothing
+        else changes.
     """
     lattice = np.asarray(lattice, dtype=bool)
     out = vertex if in_place else np.array(vertex, copy=True)
