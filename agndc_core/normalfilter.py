@@ -42,6 +42,20 @@ class NormalFilter:
     normal_iterations: int = 4
     #: passes of the vertex update towards the filtered normals
     vertex_iterations: int = 10
+    #: passes for the vertices on detail: where the filtered normals bend by more than
+    #: ``detail_degrees`` within a vertex's faces, the surface is curved at the scale of a cell
+    #: or two (wrinkles, folds), as tall as the network's noise, and the full update smooths
+    #: it away; a few passes remove the cell-to-cell jitter and keep most of it
+    detail_vertex_iterations: int = 3
+    #: spread (degrees) of a vertex's filtered face normals about their mean above which it is
+    #: on detail; ``detail_rings`` rings around such vertices count as detail too
+    detail_degrees: float = 5.0
+    detail_rings: int = 1
+    #: spread above which a vertex is on a crease: creases, the vertices an earlier stage put on
+    #: a planar face (``filter_mesh``'s ``planar_v``) and ``planar_rings`` rings around both
+    #: take all ``vertex_iterations``, detail or not
+    crease_degrees: float = 30.0
+    planar_rings: int = 1
 
 
 DEFAULT = NormalFilter()
@@ -49,7 +63,7 @@ DEFAULT = NormalFilter()
 
 def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
                 params: NormalFilter = DEFAULT, fixed_vx3: np.ndarray | None = None,
-                check=None) -> np.ndarray:
+                check=None, planar_v: np.ndarray | None = None) -> np.ndarray:
     """Denoise a triangle mesh, keeping its creases: (V, 3) float64 -> (V, 3) float64.
 
     Args:
@@ -60,6 +74,9 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
             bounding plane that an earlier stage placed: ``flatpatches.pinned_coordinates``).
         check: called before every pass (e.g. raises ``CancelledError`` when a run is
             cancelled: a pass takes well under a second even at 256³).
+        planar_v: optional (V,) bool, vertices an earlier stage placed on planar faces. When
+            given, vertices on detail stop after ``params.detail_vertex_iterations`` passes
+            (``vertex_passes``); None: every vertex takes all ``params.vertex_iterations``.
 
     Returns:
         (V, 3) float64 new vertex positions; the faces index them unchanged.
@@ -72,8 +89,49 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
     incidence = vertex_faces(faces, len(vertices))
     normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params,
                                 check)
+    passes = None
+    if planar_v is not None:
+        passes = vertex_passes(faces, incidence, normals, planar_v, params)
     return fit_vertices(vertices, faces, incidence, normals, original, params.vertex_iterations,
-                        fixed_vx3, check)
+                        fixed_vx3, check, passes)
+
+
+def normal_spread(faces, incidence, normals) -> np.ndarray:
+    """(V,) float: the largest angle (degrees) between a vertex's faces' (F, 3) ``normals``
+    and their mean (0 for a vertex of no face)."""
+    mean = incidence @ normals  # (V, 3)
+    mean /= np.maximum(np.sqrt(_dot(mean, mean)), 1e-12)[:, None]
+    corner = faces.ravel()  # (3F,) the vertex of each face corner
+    cosine = _dot(np.repeat(normals, 3, axis=0), mean[corner])  # (3F,)
+    lowest = np.ones(incidence.shape[0])
+    np.minimum.at(lowest, corner, cosine)
+    return np.degrees(np.arccos(np.clip(lowest, -1.0, 1.0)))
+
+
+def vertex_passes(faces, incidence: sp.csr_matrix, normals, planar_v: np.ndarray,
+                  params: NormalFilter = DEFAULT) -> np.ndarray:
+    """(V,) int vertex-update passes of each vertex, from the (F, 3) filtered ``normals``.
+
+    Detail vertices -- whose faces' normals spread between ``params.detail_degrees`` and
+    ``params.crease_degrees`` about their mean, and ``params.detail_rings`` rings around them --
+    take ``params.detail_vertex_iterations``, unless they lie within ``params.planar_rings``
+    rings of a ``planar_v`` vertex or of a crease vertex (spread above ``crease_degrees``).
+    Every other vertex takes ``params.vertex_iterations``: on planes and at creases the noise
+    is all there is to remove, and on surfaces curved over many cells (a vase, a cylinder, the
+    same wrinkles at twice the resolution) the full update removes noise and keeps the shape
+    (docs/experiments/normal-filter.md, "Lighter on detail")."""
+    linked = (incidence @ incidence.T).tocsr()  # (V, V) nonzero where two vertices share a face
+
+    def grow(mask, rings):
+        for _ in range(rings):
+            mask = (linked @ mask.astype(np.float64)) > 0
+        return mask
+
+    spread = normal_spread(faces, incidence, normals)
+    crease = spread > params.crease_degrees
+    detail = grow((spread > params.detail_degrees) & ~crease, params.detail_rings)
+    light = detail & ~grow(np.asarray(planar_v, dtype=bool) | crease, params.planar_rings)
+    return np.where(light, params.detail_vertex_iterations, params.vertex_iterations)
 
 
 def face_geometry(vertices: np.ndarray, faces: np.ndarray):
@@ -179,11 +237,12 @@ def bilateral_normals(normals, areas, centroids, neighbours, params: NormalFilte
 
 
 def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
-                 fixed=None, check=None) -> np.ndarray:
+                 fixed=None, check=None, passes=None) -> np.ndarray:
     """Move each vertex towards the planes of its faces: x_v += mean over faces f of v of
     n_f (n_f . (c_f - x_v)), with c_f the face's current centroid, ``iterations`` times; the
-    ``fixed`` (V, 3) coordinates do not move, and no face turns against its ``original``
-    (F, 3) normal (``keep_orientation``). ``incidence``: the (V, F) ``vertex_faces``.
+    ``fixed`` (V, 3) coordinates do not move, a vertex stops after its ``passes`` (V,) int
+    passes if given, and no face turns against its ``original`` (F, 3) normal
+    (``keep_orientation``). ``incidence``: the (V, F) ``vertex_faces``.
 
     The sum splits into sum_f n_f (n_f . c_f) - (sum_f n_f n_f^T) x_v: the 3 x 3 matrices are
     fixed (the normals do not change), so each pass is one sparse product and a batched
@@ -195,12 +254,14 @@ def fit_vertices(vertices, faces, incidence, normals, original, iterations: int,
         degree = np.where(fixed, np.inf, degree)  # (V, 3): a fixed coordinate's step is 0
     outer = (incidence @ (normals[:, :, None] * normals[:, None, :]).reshape(n_faces, 9))
     outer = outer.reshape(n_vertices, 3, 3)  # (V, 3, 3) sum of n n^T over each vertex's faces
-    for _ in range(iterations):
+    for k in range(iterations):
         if check is not None:
             check()
         centroids = face_centroids(vertices, faces)  # (F, 3)
         pull = incidence @ (normals * _dot(normals, centroids)[:, None])  # (V, 3)
         step = pull - np.einsum("vij,vj->vi", outer, vertices)  # (V, 3)
+        if passes is not None:
+            step[passes <= k] = 0.0  # this vertex's passes are done
         vertices = keep_orientation(vertices, vertices + step / degree, faces, original)
     return vertices
 
@@ -221,7 +282,7 @@ def keep_orientation(before, after, faces, original_normals) -> np.ndarray:
 
 
 def filter_mesh_naive(vertices_vx3, faces_fx3, params: NormalFilter = DEFAULT,
-                      fixed_vx3=None) -> np.ndarray:
+                      fixed_vx3=None, planar_v=None) -> np.ndarray:
     """``filter_mesh`` written face by face and vertex by vertex (slow; for tests)."""
     vertices = np.array(vertices_vx3, dtype=np.float64)
     faces = [tuple(int(k) for k in face) for face in np.asarray(faces_fx3).reshape(-1, 3)]
@@ -257,9 +318,32 @@ def filter_mesh_naive(vertices_vx3, faces_fx3, params: NormalFilter = DEFAULT,
             length = np.linalg.norm(total)
             new.append(total / length if length > 0 else np.zeros(3))
         normals = new
-    for _ in range(params.vertex_iterations):
+    passes = {v: params.vertex_iterations for v in faces_of}
+    if planar_v is not None:
+        spread = {}
+        for v, its_faces in faces_of.items():
+            mean = sum(normals[f] for f in its_faces)
+            mean = mean / max(np.linalg.norm(mean), 1e-12)
+            lowest = min(float(np.dot(normals[f], mean)) for f in its_faces)
+            spread[v] = np.degrees(np.arccos(min(max(lowest, -1.0), 1.0)))
+
+        def grow(vertex_set, rings):  # breadth-first, a ring at a time
+            vertex_set = set(vertex_set)
+            for _ in range(rings):
+                vertex_set |= {u for v in vertex_set for f in faces_of[v] for u in faces[f]}
+            return vertex_set
+
+        crease = {v for v in faces_of if spread[v] > params.crease_degrees}
+        detail = grow({v for v in faces_of if params.detail_degrees < spread[v]} - crease,
+                      params.detail_rings)
+        kept = grow({v for v in faces_of if planar_v[v]} | crease, params.planar_rings)
+        passes = {v: params.detail_vertex_iterations if v in detail - kept
+                  else params.vertex_iterations for v in faces_of}
+    for k in range(params.vertex_iterations):
         moved = vertices.copy()
         for v, its_faces in faces_of.items():
+            if passes[v] <= k:
+                continue
             step = np.zeros(3)
             for f in its_faces:
                 centroid = vertices[list(faces[f])].mean(axis=0)

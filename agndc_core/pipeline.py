@@ -277,12 +277,15 @@ def unfold_components(vertices, faces, lattice, edge, min_component_faces: int =
 def filter_contoured_mesh(vertices, faces, vertex, pinned, check=None):
     """``normalfilter.filter_mesh`` of a contoured mesh, in lattice units (where the network's
     noise is the same along every axis), keeping the coordinates the flat-patch and bounds
-    stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets)."""
+    stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets). The
+    vertices they placed are on planar faces, where the filter's full vertex update runs even
+    if the faces around bend like detail (``normalfilter.vertex_passes``)."""
     from .flatpatches import pinned_coordinates
     from .normalfilter import filter_mesh
 
-    return filter_mesh(vertices, faces, fixed_vx3=pinned_coordinates(vertices, vertex, pinned),
-                       check=check)
+    fixed = pinned_coordinates(vertices, vertex, pinned)  # (V, 3)
+    return filter_mesh(vertices, faces, fixed_vx3=fixed, check=check,
+                       planar_v=fixed.any(axis=1))
 
 
 def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray,

@@ -58,6 +58,67 @@ def test_filter_matches_the_naive_reference(params):
                                    atol=1e-12)
         np.testing.assert_array_equal(out[fixed], vertices[fixed])
         assert not np.allclose(out[~fixed], vertices[~fixed])
+        planar = np.random.default_rng(3).random(len(vertices)) < 0.05
+        np.testing.assert_allclose(filter_mesh(vertices, tris, params, fixed, planar_v=planar),
+                                   filter_mesh_naive(vertices, tris, params, fixed, planar),
+                                   atol=1e-12)
+
+
+def _strip_normals(tilted_face: int, degrees: float) -> np.ndarray:
+    """(10, 3) normals of a 10-face strip: all +z but one, tilted by ``degrees`` about x."""
+    normals = np.tile([0.0, 0.0, 1.0], (10, 1))
+    angle = np.radians(degrees)
+    normals[tilted_face] = [0.0, -np.sin(angle), np.cos(angle)]
+    return normals
+
+
+def test_vertex_passes_lighten_detail_away_from_planes_and_creases():
+    """A strip of triangles [v, v+1, v+2]: vertex v shares a face with v +- 1 and v +- 2. Face 4
+    tilted 10 degrees bends the normals at its vertices 4-6 (6.7 degrees from their mean): with
+    their ring, vertices 2-8 are detail; the planar vertex 8 and its ring (6-10) keep all
+    passes. Tilted 90 degrees, face 4 makes a crease: no vertex is lightened."""
+    from agndc_core.normalfilter import vertex_faces, vertex_passes
+
+    faces = np.array([[v, v + 1, v + 2] for v in range(10)])
+    incidence = vertex_faces(faces, 12)
+    planar = np.zeros(12, dtype=bool)
+    planar[8] = True
+    params = NormalFilter(vertex_iterations=7, detail_vertex_iterations=2, detail_degrees=5.0,
+                          detail_rings=1, crease_degrees=30.0, planar_rings=1)
+    expected = np.full(12, 7)
+    expected[[2, 3, 4, 5]] = 2
+    np.testing.assert_array_equal(
+        vertex_passes(faces, incidence, _strip_normals(4, 10.0), planar, params), expected)
+    np.testing.assert_array_equal(
+        vertex_passes(faces, incidence, _strip_normals(4, 90.0), planar, params), 7)
+    flat = _strip_normals(4, 0.0)  # no bend, no detail
+    np.testing.assert_array_equal(vertex_passes(faces, incidence, flat, planar, params), 7)
+
+
+def _wrinkled_sphere(subdivisions=4):
+    """An icosphere of radius 1 with wrinkles along its normals: waves ~0.5 long and up to
+    0.03 high, a few cells long on a mesh of edges ~0.08 (detail, not noise)."""
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v = np.asarray(sphere.vertices)
+    wave = 0.03 * np.sin(12 * v[:, 0]) * np.sin(12 * v[:, 1])
+    return v * (1 + wave)[:, None], np.asarray(sphere.faces)
+
+
+def test_detail_takes_the_lighter_update():
+    """On a wrinkled sphere (no planar vertex) the filter keeps more of the wrinkles than the
+    full update does; with every vertex planar, or no angle counting as detail, it is the
+    full update."""
+    wrinkled, faces = _wrinkled_sphere()
+    none, every = np.zeros(len(wrinkled), dtype=bool), np.ones(len(wrinkled), dtype=bool)
+    full = filter_mesh(wrinkled, faces)
+    np.testing.assert_array_equal(filter_mesh(wrinkled, faces, planar_v=every), full)
+    never = NormalFilter(detail_degrees=90.0)
+    np.testing.assert_array_equal(filter_mesh(wrinkled, faces, never, planar_v=none),
+                                  filter_mesh(wrinkled, faces, never))
+    light = filter_mesh(wrinkled, faces, planar_v=none)
+    lost = [float(np.sqrt(np.mean(np.sum((out - wrinkled) ** 2, axis=1))))
+            for out in (full, light)]  # RMS of what the filter took
+    assert lost[1] < 0.85 * lost[0]
 
 
 def test_faces_flatten_while_corners_stay():
