@@ -15,6 +15,11 @@ TVCG 2007): each vertex moves by the mean, over its faces, of its distance to th
 (through the face's centroid, along the filtered normal), so vertices move only across the
 surface, never along it.
 
+The update runs fewer passes on detail (``vertex_passes``): where the filtered normals bend by
+a few degrees within a vertex's faces, away from creases and from the planar faces an earlier
+stage placed, the surface is curved at the scale of a cell or two -- wrinkles as tall as the
+noise -- and the full update would smooth them away.
+
 Faces and their order are kept: the mesh's topology, and so its closed 2-manifoldness, are
 unchanged. ``filter_mesh`` is the vectorised entry; ``filter_mesh_naive`` is the slow, obviously
 correct reference that loops over faces and vertices (tests compare the two).
