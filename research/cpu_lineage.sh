@@ -7,7 +7,9 @@
 # Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100, +100);
 # stage 2: its step-3000 checkpoint continued 2,400 steps on the true targets; stage 3: the
 # shipped AGNDC (better than stages 1-2 on the validation family) continued 6,000 steps on 900
-# new shapes with --wrinkled 0.5 (DATA_wrinkled; docs/experiments/wrinkled-training.md). Pause it
+# new shapes with --wrinkled 0.5 (DATA_wrinkled; docs/experiments/wrinkled-training.md); stage 4:
+# stage 3's step 2,000 (its best on the validation family; later steps at 2e-4 drift) continued
+# 6,000 steps on the same data at a quarter of the learning rate with a slower EMA. Pause it
 # for a benchmark with kill -STOP / kill -CONT on the `agndc train` process.
 # With a third argument `undc`: the lineage's UNDC twin instead (the same data, steps, seeds and
 # curriculum), the baseline of the AGNDC-against-UNDC comparison in docs/training.md.
@@ -49,3 +51,6 @@ fi
 stage wr_agndc16 --data "$wrinkled" --init agndc_core/weights/agndc.safetensors \
     --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
     --lr 2e-4 --ema 0.99 --seed 7 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
+stage wr_agndc16_low --data "$wrinkled" --init "$runs/wr_agndc16/step-002000.safetensors" \
+    --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
+    --lr 5e-5 --ema 0.999 --seed 8 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
