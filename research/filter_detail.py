@@ -41,17 +41,12 @@ def ring_average(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
 
 def away_from_creases(vertices, faces, average, crease_degrees: float) -> np.ndarray:
     """(V,) bool: vertices whose faces' normals all lie within ``crease_degrees`` of their
-    mean, and whose ring holds no vertex that fails this."""
-    from agndc_core.normalfilter import face_geometry, vertex_faces
+    mean (``normalfilter.normal_spread``), and whose ring holds no vertex that fails this."""
+    from agndc_core.normalfilter import face_geometry, normal_spread, vertex_faces
 
     normals = face_geometry(vertices, faces)[0]  # (F, 3)
-    mean = vertex_faces(faces, len(vertices)) @ normals  # (V, 3)
-    mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-12)
-    corner = faces.ravel()  # (3F,) vertex of each face corner
-    cosine = np.einsum("ij,ij->i", np.repeat(normals, 3, axis=0), mean[corner])
-    lowest = np.ones(len(vertices))
-    np.minimum.at(lowest, corner, cosine)
-    crease = lowest < np.cos(np.radians(crease_degrees))
+    spread = normal_spread(faces, vertex_faces(faces, len(vertices)), normals)
+    crease = spread > crease_degrees
     return (average @ crease.astype(np.float64)) == 0
 
 
@@ -101,10 +96,10 @@ def main() -> None:
     plain = normalfilter.filter_mesh
 
     def filter_and_restore(vertices, faces, params=normalfilter.DEFAULT, fixed_vx3=None,
-                           check=None):
+                           check=None, planar_v=None):
         network = np.asarray(vertices, dtype=np.float64)
         faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-        filtered = plain(network, faces, params, fixed_vx3, check)
+        filtered = plain(network, faces, params, fixed_vx3, check, planar_v)
         if len(faces) == 0:
             return filtered
         return give_detail_back(network, filtered, faces, fixed_vx3, args)
