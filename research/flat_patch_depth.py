@@ -7,12 +7,17 @@ rule replaced:
 * ``shipped``: the mean on the shape's outermost layer on each side, the midpoint inside;
 * ``mean``: the mean everywhere (the stage before the rule);
 * ``midpoint``: the midpoint everywhere;
-* ``outer-midpoint``: the reverse of the shipped rule.
+* ``outer-midpoint``: the reverse of the shipped rule;
+
+and ``--thin N`` puts the outermost patches at the midpoint as well along an axis where the
+whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --sheets``).
 
     .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
     .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
+    .venv/bin/python research/flat_patch_depth.py SHEETS --thin 3 --res 64 -o OUT
 
-docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint") has the numbers.
+docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint", "Thin sheets") has the
+numbers.
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ def main() -> None:
     parser.add_argument("-o", "--out", required=True)
     parser.add_argument("--depth", default="shipped",
                         choices=["shipped", "mean", "midpoint", "outer-midpoint"])
+    parser.add_argument("--thin", type=int, default=0, help="midpoint on the outermost layers "
+                        "too along an axis where the shape is at most this many voxels thick")
     parser.add_argument("--methods", default="agndc")
     parser.add_argument("--res", type=int, default=64)
     parser.add_argument("--shifts", type=int, default=0)
@@ -41,6 +48,9 @@ def main() -> None:
 
     def replaced(lattice, axis):
         layers = shipped(lattice, axis)
+        occupied = np.flatnonzero(lattice.any(axis=tuple(a for a in range(3) if a != axis)))
+        if len(occupied) and occupied[-1] - occupied[0] + 1 <= args.thin:
+            return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":
             return {kind: np.ones_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "midpoint":

@@ -809,6 +809,73 @@ def generate_shape(seed: int) -> tuple[np.ndarray, np.ndarray]:
     return _to_arrays(Manifold.cube((1.0, 0.7, 0.5), center=True))  # never reached in practice
 
 
+# ---------------------------------------------------------------- thin sheets (training)
+
+
+def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
+    """A flat plate ``thickness`` thick (a fraction of its longest side, which is 1 after
+    normalisation): a random star-shaped outline with rounded corners, 1 across, minus 0-6
+    through or blind tools (holes, slots, pockets, countersinks) entering from either face.
+
+    ``generate_shape`` never gives a shape this thin (it rejects a shortest side under 5 % of
+    the longest); training recipes ask for sheets by thickness in voxels of their own
+    resolution (``training.data.sample_recipe``). Placement: on the grid axes (a signed axis
+    permutation) for ``AXIS_ALIGNED_FRACTION`` of the seeds, otherwise turned 1-10° off them or,
+    for a third of those, freely. Deterministic in (seed, thickness)."""
+    aligned = is_axis_aligned(seed)
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, attempt, 5))
+        segs = int(rng.integers(SEGMENTS[0], SEGMENTS[1] + 1))
+        n = int(rng.integers(4, 12))
+        ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
+        rad = 0.5 * rng.uniform(0.45, 1.0, n)
+        section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
+        r = rng.uniform(0.01, 0.08)
+        section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
+        lo2, hi2 = _section_box(section)
+        section = section.scale(tuple(np.full(2, 1.0 / (hi2 - lo2).max())))  # 1 across
+        body = section.extrude(thickness)
+        lo, hi = _bounds(body)
+        cuts = []
+        for _ in range(int(rng.integers(0, 7))):
+            width = rng.uniform(0.03, 0.15)
+            depth = thickness * (1.5 if rng.random() < 0.7 else rng.uniform(0.3, 0.7))
+            tool = _profile_tool(rng, segs, width, depth + 0.05)
+            point = np.append(rng.uniform(lo[:2], hi[:2]) * 0.7, 0.0)
+            if rng.random() < 0.5:  # from the top face down
+                tool = tool.translate((0, 0, -0.05)).rotate((180, 0, 0)).translate(
+                    (0, 0, thickness))
+            else:
+                tool = tool.translate((0, 0, -0.05))
+            cuts.append(tool.translate(tuple(point)))
+        m = Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        if aligned:
+            turn = _random_rotation(rng, aligned=True)
+        elif rng.random() < 1 / 3:
+            turn = _random_rotation(rng, aligned=False)
+        else:
+            axis = rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            angle = np.radians(rng.uniform(1.0, 10.0))
+            k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+            turn = (np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k) @ \
+                _random_rotation(rng, aligned=True)
+        affine = np.zeros((3, 4))
+        affine[:, :3] = turn
+        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
+        if _edge_manifold(faces):
+            return vertices, faces
+    return _to_arrays(Manifold.cube((1.0, 0.7, thickness), center=True))
+
+
+def _section_box(section: CrossSection) -> tuple[np.ndarray, np.ndarray]:
+    """(2,) min and max corners of a cross-section."""
+    box = section.bounds()
+    return np.asarray(box[:2], dtype=float), np.asarray(box[2:], dtype=float)
+
+
 def generate_dataset(n: int, seed0: int = 0):
     """Yield ``(seed, vertices, faces)`` for seeds ``seed0 .. seed0 + n - 1``."""
     for seed in range(seed0, seed0 + n):

@@ -17,6 +17,14 @@ real meshes the remesher is judged on:
   (flat faces at every angle, sharp creases), hexagonal lattice panels, name plates with
   raised pixel glyphs, stepped pyramids.
 
+**Thin sheets** are a family of their own (``sheet_shape``, ``agndc val-data --sheets``, seeds
+from ``SHEET_SEED0``): flat plates 1.5-3 voxels thick at 64^3, with holes, slots, windows and
+pockets (gaskets, laser-cut and sheet-metal parts, plates lying on a print bed). Both the
+training generator and the family above reject a shape whose shortest side is under 5 % of its
+longest (3.1 voxels at 64^3), so a whole shape this thin is new to the networks; the two faces
+that bound it lie in the shape's outermost layers of cells, where the flat-patch stage reads
+their depth from the network (``flatpatches.py``).
+
 ``validation_shape(seed)`` returns the class, the builder's name and a normalised closed mesh
 (bounding-box centre at the origin, longest side 1), deterministic in the seed. ``write_family``
 writes OBJ files and a ``MANIFEST.csv`` whose ``kind`` column ``agndc eval`` reports by.
@@ -59,6 +67,11 @@ ALIGNED_SHARE = 0.4
 WALL_VOXELS = (1.5, 4.0)
 #: samples per unit length of the organic classes' fields
 FIELD_SAMPLES = 96
+#: thin sheets: first seed, thickness in voxels at 64^3, share left on the grid axes (plates
+#: mostly lie on a bed or a scanner's table; the rest are turned 1-15° like the CAD parts)
+SHEET_SEED0 = 3_000_000
+SHEET_VOXELS = (1.5, 3.0)
+SHEET_ALIGNED_SHARE = 0.6
 #: share of the figurines with a scanned look, and their wrinkles' wavelengths (voxels at 64^3)
 WRINKLED_SHARE = 0.5
 WRINKLE_VOXELS = (3.0, 10.0)
@@ -302,6 +315,64 @@ def _stepped(rng, segs) -> Manifold:
     return body
 
 
+# ---------------------------------------------------------------- thin sheets
+
+
+def _sheet(rng, segs) -> Manifold:
+    """A flat plate ``SHEET_VOXELS`` thick at 64^3, 1 long: a rounded rectangle, a gasket
+    (a ring) or an L outline, with 1-8 round holes, sometimes a slot, a window or a pocket
+    half the plate deep."""
+    t = _voxels(rng, *SHEET_VOXELS)
+    outline = int(rng.integers(3))
+    if outline == 0:  # rounded rectangle, 1 x 0.4-1
+        w, h = 1.0, rng.uniform(0.4, 1.0)
+        body = _rounded_rect(w, h, h * rng.uniform(0.02, 0.2), segs).extrude(t)
+        inner = np.array([w, h]) / 2 - 0.08
+    elif outline == 1:  # gasket: a ring, 1 across
+        r_in = rng.uniform(0.15, 0.3)
+        ring = CrossSection.circle(0.5, segs * 2) - CrossSection.circle(r_in, segs)
+        body = ring.extrude(t)
+        inner = None
+    else:  # L: two arms 1 and 0.5-1 long
+        a, b = rng.uniform(0.2, 0.4), rng.uniform(0.5, 1.0)
+        arm1 = CrossSection.square((1.0, a)).translate((-0.5, -b / 2))
+        arm2 = CrossSection.square((a, b)).translate((-0.5, -b / 2))
+        body = (arm1 + arm2).extrude(t)
+        inner = None
+    cuts = []
+    r_hole = rng.uniform(0.015, 0.06)
+    hole = Manifold.cylinder(1.0, r_hole, r_hole, segs).translate((0, 0, -0.5))
+    if outline == 1:  # bolt holes on a circle between the bore and the rim
+        n = int(rng.integers(3, 9))
+        r_circle = (0.5 + r_in) / 2
+        cuts += [hole.translate((r_circle * np.cos(x), r_circle * np.sin(x), 0))
+                 for x in 2 * np.pi * (np.arange(n) + rng.uniform()) / n]
+    elif outline == 0:
+        n = int(rng.integers(1, 9))
+        cuts += [hole.translate((x, y, 0)) for x, y in
+                 rng.uniform(-1, 1, (n, 2)) * np.maximum(inner - r_hole, 0.0)]
+        if rng.random() < 0.4:  # a slot
+            half = rng.uniform(0.05, 0.15)
+            r_slot = rng.uniform(0.015, 0.04)
+            end = Manifold.cylinder(1.0, r_slot, r_slot, segs).translate((0, 0, -0.5))
+            slot = Manifold.batch_hull([end.translate((-half, 0, 0)), end.translate((half, 0, 0))])
+            cuts.append(slot.rotate((0, 0, rng.uniform(0, 180))).translate(
+                tuple(rng.uniform(-0.5, 0.5, 2) * np.maximum(inner - half - r_slot, 0.0)) + (0,)))
+        if rng.random() < 0.3:  # a rectangular window
+            size = rng.uniform(0.1, 0.3, 2) * np.array([1.0, inner[1] / 0.5])
+            cuts.append(_rounded_rect(*size, size.min() * 0.2, segs).extrude(1.0).translate(
+                (*(rng.uniform(-1, 1, 2) * np.maximum(inner - size / 2, 0.0)), -0.5)))
+    else:  # holes along the L's long arm
+        n = int(rng.integers(1, 6))
+        cuts += [hole.translate((x, -b / 2 + a / 2, 0)) for x in
+                 np.linspace(-0.5 + a + 0.05, 0.5 - 0.05, n)]
+    if rng.random() < 0.3:  # a pocket half the plate deep, from the top
+        size = rng.uniform(0.15, 0.35, 2)
+        cuts.append(_rounded_rect(*size, size.min() * 0.2, segs).extrude(t).translate(
+            (*rng.uniform(-0.25, 0.25, 2), t / 2)))
+    return Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
+
+
 BUILDERS = {
     "cad": {"tilted_part": (_tilted_part, 0.40), "flange": (_flange, 0.2),
             "gear": (_gear, 0.2), "bracket": (_bracket, 0.2)},
@@ -372,22 +443,50 @@ def validation_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     raise RuntimeError(f"validation seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
 
 
+def sheet_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
+    """``validation_shape`` of the thin-sheet family: ("cad", "sheet", vertices, faces),
+    deterministic in the seed (its own stream)."""
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, SEED_STREAM, attempt, 1))
+        m = _sheet(rng, int(rng.integers(24, 65)))
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        perm = _random_rotation(rng, aligned=True)
+        turn = np.eye(3) if rng.random() < SHEET_ALIGNED_SHARE else _tilt(rng)
+        affine = np.zeros((3, 4))
+        affine[:, :3] = turn @ perm
+        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
+        if _edge_manifold(faces):
+            return "cad", "sheet", vertices, faces
+    raise RuntimeError(f"sheet seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+
+
+#: the shape functions of ``write_family``'s families
+FAMILIES = {"main": validation_shape, "sheets": sheet_shape}
+
+
 def _write_one(args) -> dict:
-    seed, out = args
+    seed, out, family = args
     from ..gridio import save_mesh
 
-    kind, name, vertices, faces = validation_shape(seed)
+    kind, name, vertices, faces = FAMILIES[family](seed)
     path = f"val_{seed}.obj"
     save_mesh(vertices, faces, Path(out) / path)
     return {"file": path, "kind": kind, "shape": name, "seed": seed, "faces": len(faces)}
 
 
-def write_family(out, n: int, seed0: int = SEED0, workers: int = 2) -> list[dict]:
-    """Write seeds ``seed0 .. seed0 + n - 1`` as OBJ files and ``MANIFEST.csv`` (file, kind,
-    shape, seed, faces) into ``out``; returns the manifest rows."""
+def write_family(out, n: int, seed0: int | None = None, workers: int = 2,
+                 family: str = "main") -> list[dict]:
+    """Write seeds ``seed0 .. seed0 + n - 1`` (default: ``SEED0``, or ``SHEET_SEED0`` for the
+    "sheets" family) of ``family`` ("main" or "sheets") as OBJ files and ``MANIFEST.csv``
+    (file, kind, shape, seed, faces) into ``out``; returns the manifest rows."""
+    if family not in FAMILIES:
+        raise ValueError(f"unknown validation family {family!r}; choose one of {list(FAMILIES)}")
+    if seed0 is None:
+        seed0 = SHEET_SEED0 if family == "sheets" else SEED0
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(seed, str(out)) for seed in range(seed0, seed0 + n)]
+    jobs = [(seed, str(out), family) for seed in range(seed0, seed0 + n)]
     if workers > 1:
         from multiprocessing import get_context
 

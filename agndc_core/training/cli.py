@@ -18,6 +18,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--wrinkled", type=float, default=0.0, help="share of the organic and "
                    "smooth shapes whose surface gets fine wrinkles, waves 3-10 voxels long at "
                    "64 voxels, like a scan (default 0)")
+    p.add_argument("--sheets", type=float, default=0.0, help="share of the samples that are "
+                   "thin sheets instead, 1.5-4 voxels thick at their resolution (default 0; "
+                   "the other samples stay as they are without it)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -25,7 +28,10 @@ def add_train_parser(sub) -> None:
                        "from the training generator, for choosing checkpoints and recipes")
     p.add_argument("-o", "--out", type=Path, required=True)
     p.add_argument("-n", "--count", type=int, default=48)
-    p.add_argument("--seed0", type=int, default=None, help="first seed (default 2,000,000)")
+    p.add_argument("--seed0", type=int, default=None, help="first seed (default 2,000,000; "
+                   "3,000,000 with --sheets)")
+    p.add_argument("--sheets", action="store_true", help="the thin-sheet family instead: flat "
+                   "plates 1.5-3 voxels thick at 64^3 with holes, slots and pockets")
     p.add_argument("--workers", type=int, default=2)
     p.set_defaults(func=_cmd_val_data)
 
@@ -102,7 +108,8 @@ def _cmd_data(args) -> int:
     if len(bounds) != 2:
         raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
-                          resolution_range=bounds, wrinkled=args.wrinkled)
+                          resolution_range=bounds, wrinkled=args.wrinkled,
+                          sheets=args.sheets)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 
@@ -110,10 +117,10 @@ def _cmd_data(args) -> int:
 def _cmd_val_data(args) -> int:
     from collections import Counter
 
-    from ..study.validation import SEED0, write_family
+    from ..study.validation import write_family
 
-    rows = write_family(args.out, args.count, SEED0 if args.seed0 is None else args.seed0,
-                        args.workers)
+    rows = write_family(args.out, args.count, args.seed0, args.workers,
+                        family="sheets" if args.sheets else "main")
     kinds = Counter(r["kind"] for r in rows)
     print(f"{len(rows)} meshes in {args.out} ({', '.join(f'{n} {k}' for k, n in kinds.items())})")
     return 0

@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import AGNDCError
 from ..grid import pad_to_lattice
 from ..labels import make_labels
-from ..study.shapes import generate_shape, is_axis_aligned, shape_family
+from ..study.shapes import generate_shape, is_axis_aligned, shape_family, sheet_shape
 from ..voxelize import voxelize
 
 RESOLUTION_RANGE = (32, 128)  # voxels on the longest side (random scale, log-uniform)
@@ -31,6 +31,10 @@ WRINKLED_FAMILIES = ("organic", "smooth")
 WRINKLE_WAVES = 8
 WRINKLE_WAVELENGTH = (3 / 64, 10 / 64)
 WRINKLE_AMPLITUDE = (0.1 / 64, 0.3 / 64)
+#: thin sheets (``sample_recipe(sheets=...)``): thickness in voxels of the sample's own grid
+#: (``shapes.sheet_shape``; the shape generator's families are never under 5 % of the longest
+#: side thick, 1.6-6.4 voxels at 32-128)
+SHEET_VOXELS = (1.5, 4.0)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -49,7 +53,7 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
-                  wrinkled: float = 0.0) -> dict:
+                  wrinkled: float = 0.0, sheets: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -58,7 +62,10 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     grid-aligned samples is ``AXIS_ALIGNED_FRACTION * (1 - rotate_fraction)`` (0.35 by default).
     ``wrinkled`` is the share of the ``WRINKLED_FAMILIES`` samples whose surface gets fine
     wrinkles (``wrinkle_mesh``); its draws come after all others, so the other fields of a seed
-    do not depend on it. The recipe also records the shape family and whether the sample is
+    do not depend on it. ``sheets`` is the share of seeds that become a thin sheet instead
+    (``shapes.sheet_shape``, ``SHEET_VOXELS`` thick at the recipe's resolution, family
+    "sheet", no wrinkles), drawn from a stream of its own: the other seeds' recipes are those
+    of ``sheets=0``. The recipe also records the shape family and whether the sample is
     grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
@@ -83,6 +90,11 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
             "amplitude": rng.uniform(*WRINKLE_AMPLITUDE, WRINKLE_WAVES).tolist(),
             "phase": rng.uniform(0, 2 * np.pi, WRINKLE_WAVES).tolist(),
         }
+    sheet_rng = np.random.default_rng([seed, 1234, 5])
+    if sheets > 0 and sheet_rng.random() < sheets:
+        recipe.pop("wrinkles", None)
+        recipe["family"] = "sheet"
+        recipe["sheet_voxels"] = float(sheet_rng.uniform(*SHEET_VOXELS))
     return recipe
 
 
@@ -103,7 +115,11 @@ def wrinkle_mesh(vertices: np.ndarray, faces: np.ndarray, wrinkles: dict):
 
 def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
     """The ground-truth mesh of a recipe: (V, 3) float64, (F, 3) int64."""
-    vertices, faces = generate_shape(recipe["seed"])
+    if "sheet_voxels" in recipe:  # voxelize spans the longest side (1) with resolution - 2
+        vertices, faces = sheet_shape(recipe["seed"],
+                                      recipe["sheet_voxels"] / (recipe["resolution"] - 2))
+    else:
+        vertices, faces = generate_shape(recipe["seed"])
     if "wrinkles" in recipe:
         vertices, faces = wrinkle_mesh(vertices, faces, recipe["wrinkles"])
     return vertices @ np.asarray(recipe["rotation"]).T, faces
@@ -150,7 +166,8 @@ def _write_one(args) -> str:
 
 
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
-                  resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0) -> list[Path]:
+                  resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
+                  sheets: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -167,8 +184,8 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
         raise AGNDCError(f"training resolutions must satisfy 8 <= lo <= hi, got {lo}..{hi}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled), out_dir / f"sample_{seed:06d}.npz")
-            for seed in range(seed0, seed0 + n)]
+    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets),
+             out_dir / f"sample_{seed:06d}.npz") for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:
             paths = list(tqdm(pool.imap(_write_one, jobs), total=n, desc="data",

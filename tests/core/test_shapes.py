@@ -15,13 +15,16 @@ from agndc_core.study.shapes import (
     generate_shape,
     is_axis_aligned,
     shape_family,
+    sheet_shape,
 )
 from agndc_core.training.data import (
     RESOLUTION_RANGE,
+    SHEET_VOXELS,
     WRINKLE_AMPLITUDE,
     WRINKLE_WAVELENGTH,
     WRINKLE_WAVES,
     WRINKLED_FAMILIES,
+    make_sample,
     recipe_mesh,
     sample_recipe,
 )
@@ -129,6 +132,38 @@ def test_wrinkled_recipes_keep_their_other_draws_and_give_closed_wrinkled_meshes
     distance = np.abs(trimesh.proximity.signed_distance(smooth, mesh.vertices[::50]))
     assert distance.max() <= sum(waves["amplitude"]) + 1e-6
     assert distance.mean() > 0.2 * WRINKLE_AMPLITUDE[0]
+
+
+def test_sheet_recipes_keep_the_other_seeds_and_give_thin_closed_plates():
+    seeds = range(300)
+    plain = [sample_recipe(s, wrinkled=0.5) for s in seeds]
+    mixed = [sample_recipe(s, wrinkled=0.5, sheets=0.2) for s in seeds]
+    sheets = [b for b in mixed if "sheet_voxels" in b]
+    assert len(sheets) / len(mixed) == pytest.approx(0.2, abs=0.07)
+    for a, b in zip(plain, mixed):
+        if "sheet_voxels" in b:  # the same grid, another shape, never wrinkled
+            assert b["family"] == "sheet" and "wrinkles" not in b
+            assert SHEET_VOXELS[0] <= b["sheet_voxels"] <= SHEET_VOXELS[1]
+            assert {k: b[k] for k in ("resolution", "shift", "rotation")} == {
+                k: a[k] for k in ("resolution", "shift", "rotation")}
+        else:
+            assert b == a
+    # an aligned sheet is as thick as asked, in voxels of its own grid, and closed
+    recipe = next(r for r in sheets if r["axis_aligned"] and r["resolution"] <= 64)
+    mesh = trimesh.Trimesh(*recipe_mesh(recipe), process=False)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    extent = np.sort(mesh.bounds[1] - mesh.bounds[0])
+    assert extent[-1] == pytest.approx(1.0, abs=1e-6)
+    assert extent[0] * (recipe["resolution"] - 2) == pytest.approx(recipe["sheet_voxels"],
+                                                                   rel=1e-6)
+    sample = make_sample(recipe)
+    occupied = sample["lattice"].any(axis=tuple(a for a in range(3) if a != np.argmin(
+        sample["lattice"].shape)))
+    assert 1 <= occupied.sum() <= np.ceil(recipe["sheet_voxels"]) + 1
+    # deterministic, and thicker when asked
+    v, f = sheet_shape(recipe["seed"], 0.05)
+    np.testing.assert_array_equal(v, sheet_shape(recipe["seed"], 0.05)[0])
+    assert np.sort(v.max(0) - v.min(0))[0] == pytest.approx(0.05, rel=1e-6)
 
 
 def _on_grid_share(mesh) -> float:

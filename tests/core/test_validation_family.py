@@ -12,8 +12,11 @@ from agndc_core.study.validation import (
     CLASS_WEIGHTS,
     CLASSES,
     SEED0,
+    SHEET_SEED0,
+    SHEET_VOXELS,
     TILT_DEGREES,
     class_of,
+    sheet_shape,
     validation_shape,
     write_family,
 )
@@ -95,3 +98,34 @@ def test_write_family_manifest_reads_back_by_class(tmp_path):
     for path, _ in found:
         mesh = trimesh.load(path, process=False)
         assert mesh.is_watertight
+
+
+def test_sheets_are_closed_and_thinner_than_the_main_family_allows():
+    """Every thin sheet is a closed outward solid, normalised like the main family; the aligned
+    ones are SHEET_VOXELS thick at 64^3 (under the 5 % of the longest side that the main family
+    and the training generator reject); the family draws both placements."""
+    aligned = 0
+    for seed in range(SHEET_SEED0, SHEET_SEED0 + 12):
+        kind, name, vertices, faces = sheet_shape(seed)
+        assert (kind, name) == ("cad", "sheet")
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, seed
+        extent = np.sort(mesh.bounds[1] - mesh.bounds[0])
+        assert extent[-1] == pytest.approx(1.0, abs=1e-6)
+        thickness = extent[0] * 64
+        if thickness <= SHEET_VOXELS[1] + 1e-6:
+            aligned += 1
+            assert SHEET_VOXELS[0] * 0.95 <= thickness, seed
+            assert extent[0] < 0.05
+    assert 0 < aligned < 12
+
+
+def test_write_family_of_sheets(tmp_path):
+    rows = write_family(tmp_path, 3, workers=1, family="sheets")
+    assert [r["seed"] for r in rows] == list(range(SHEET_SEED0, SHEET_SEED0 + 3))
+    assert {r["shape"] for r in rows} == {"sheet"}
+    np.testing.assert_array_equal(sheet_shape(SHEET_SEED0)[2], sheet_shape(SHEET_SEED0)[2])
+    found = find_meshes(tmp_path)
+    assert [category for _, category in found] == ["CAD"] * 3
+    with pytest.raises(ValueError, match="unknown validation family"):
+        write_family(tmp_path, 1, family="plates")
