@@ -740,6 +740,16 @@ def _random_rotation(rng, aligned: bool) -> np.ndarray:
     return q
 
 
+def small_turn(rng, degrees: tuple[float, float]) -> np.ndarray:
+    """(3, 3) rotation by a uniform angle in ``degrees`` about a uniformly random axis
+    (Rodrigues' formula)."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    angle = np.radians(rng.uniform(*degrees))
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
 def _global_transform(m: Manifold, rng, aligned: bool) -> Manifold:
     """Non-uniform stretch along the part axes, then a rotation."""
     affine = np.zeros((3, 4))
@@ -856,12 +866,7 @@ def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
         elif rng.random() < 1 / 3:
             turn = _random_rotation(rng, aligned=False)
         else:
-            axis = rng.normal(size=3)
-            axis /= np.linalg.norm(axis)
-            angle = np.radians(rng.uniform(1.0, 10.0))
-            k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-            turn = (np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k) @ \
-                _random_rotation(rng, aligned=True)
+            turn = small_turn(rng, (1.0, 10.0)) @ _random_rotation(rng, aligned=True)
         affine = np.zeros((3, 4))
         affine[:, :3] = turn
         vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))

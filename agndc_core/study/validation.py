@@ -50,6 +50,7 @@ from .shapes import (
     _smooth_curve,
     _to_arrays,
     field_surface,
+    small_turn,
 )
 
 #: a stream of its own: the same seed never draws what ``shapes.generate_shape`` draws
@@ -393,11 +394,7 @@ def _draw(rng, table: dict):
 
 def _tilt(rng) -> np.ndarray:
     """(3, 3) rotation by 1-15° about a random axis."""
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    angle = np.radians(rng.uniform(*TILT_DEGREES))
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    return small_turn(rng, TILT_DEGREES)
 
 
 def _place(m: Manifold, rng, kind: str) -> Manifold:
