@@ -9,7 +9,11 @@
 # shipped AGNDC (better than stages 1-2 on the validation family) continued 6,000 steps on 900
 # new shapes with --wrinkled 0.5 (DATA_wrinkled; docs/experiments/wrinkled-training.md); stage 4:
 # stage 3's step 2,000 (its best on the validation family; later steps at 2e-4 drift) continued
-# 6,000 steps on the same data at a quarter of the learning rate with a slower EMA. Pause it
+# 6,000 steps on the same data at a quarter of the learning rate with a slower EMA; stage 5:
+# the shipped AGNDC continued 1,500 steps on DATA plus 200 thin sheets (DATA_sheets, agndc
+# train-data --sheets 1.0; docs/experiments/sheet-training.md); stage 6: its step 1,000 (its
+# best on the validation family) continued 4,000 steps at half the learning rate. Stages 5-6 run
+# before stage 4, which waits with its state where it stopped. Pause it
 # for a benchmark with kill -STOP / kill -CONT on the `agndc train` process.
 # With a third argument `undc`: the lineage's UNDC twin instead (the same data, steps, seeds and
 # curriculum), the baseline of the AGNDC-against-UNDC comparison in docs/training.md.
@@ -51,6 +55,20 @@ fi
 stage wr_agndc16 --data "$wrinkled" --init agndc_core/weights/agndc.safetensors \
     --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
     --lr 2e-4 --ema 0.99 --seed 7 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
+sheets="${data}_sheets"
+if [[ ! -f "$sheets/.done" ]]; then
+    .venv/bin/agndc train-data -o "$sheets" -n 200 --seed0 20000 --sheets 1.0 --workers 1 \
+        && touch "$sheets/.done"
+fi
+shipped_config='{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}'
+# stage 5 started from the weights shipped before it (gpu1, sha256 in docs/experiments/
+# sheet-training.md); stage 6 goes on from its step 1,000
+stage sh_agndc16 --data "$data,$sheets" --init agndc_core/weights/agndc.safetensors \
+    --model "$shipped_config" --lr 1e-4 --ema 0.99 --seed 9 --steps 1500,0,0 \
+    --val-steps 500,1000,1500
+stage sh_agndc16_cont --data "$data,$sheets" --init "$runs/sh_agndc16/step-001000.safetensors" \
+    --model "$shipped_config" --lr 5e-5 --ema 0.995 --seed 10 --steps 4000,0,0 \
+    --val-steps 1000,2000,3000,4000
 stage wr_agndc16_low --data "$wrinkled" --init "$runs/wr_agndc16/step-002000.safetensors" \
     --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
     --lr 5e-5 --ema 0.999 --seed 8 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
