@@ -17,7 +17,7 @@ real meshes the remesher is judged on:
   (flat faces at every angle, sharp creases), hexagonal lattice panels, name plates with
   raised pixel glyphs, stepped pyramids.
 
-**Thin sheets** are a family of their own (``sheet_shape``, ``agndc val-data --sheets``, seeds
+**Thin sheets** are a family of their own (``validation_sheet``, ``agndc val-data --sheets``, seeds
 from ``SHEET_SEED0``): flat plates 1.5-3 voxels thick at 64^3, with holes, slots, windows and
 pockets (gaskets, laser-cut and sheet-metal parts, plates lying on a print bed). Both the
 training generator and the family above reject a shape whose shortest side is under 5 % of its
@@ -440,7 +440,7 @@ def validation_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     raise RuntimeError(f"validation seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
 
 
-def sheet_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
+def validation_sheet(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     """``validation_shape`` of the thin-sheet family: ("cad", "sheet", vertices, faces),
     deterministic in the seed (its own stream)."""
     for attempt in range(MAX_ATTEMPTS):
@@ -459,7 +459,7 @@ def sheet_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
 
 
 #: the shape functions of ``write_family``'s families
-FAMILIES = {"main": validation_shape, "sheets": sheet_shape}
+FAMILIES = {"main": validation_shape, "sheets": validation_sheet}
 
 
 def _write_one(args) -> dict:

@@ -16,8 +16,8 @@ from agndc_core.study.validation import (
     SHEET_VOXELS,
     TILT_DEGREES,
     class_of,
-    sheet_shape,
     validation_shape,
+    validation_sheet,
     write_family,
 )
 
@@ -106,7 +106,7 @@ def test_sheets_are_closed_and_thinner_than_the_main_family_allows():
     and the training generator reject); the family draws both placements."""
     aligned = 0
     for seed in range(SHEET_SEED0, SHEET_SEED0 + 12):
-        kind, name, vertices, faces = sheet_shape(seed)
+        kind, name, vertices, faces = validation_sheet(seed)
         assert (kind, name) == ("cad", "sheet")
         mesh = trimesh.Trimesh(vertices, faces, process=False)
         assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, seed
@@ -124,7 +124,8 @@ def test_write_family_of_sheets(tmp_path):
     rows = write_family(tmp_path, 3, workers=1, family="sheets")
     assert [r["seed"] for r in rows] == list(range(SHEET_SEED0, SHEET_SEED0 + 3))
     assert {r["shape"] for r in rows} == {"sheet"}
-    np.testing.assert_array_equal(sheet_shape(SHEET_SEED0)[2], sheet_shape(SHEET_SEED0)[2])
+    first = validation_sheet(SHEET_SEED0)
+    np.testing.assert_array_equal(first[2], validation_sheet(SHEET_SEED0)[2])
     found = find_meshes(tmp_path)
     assert [category for _, category in found] == ["CAD"] * 3
     with pytest.raises(ValueError, match="unknown validation family"):
