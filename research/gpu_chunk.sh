@@ -19,8 +19,8 @@
 # AGNDC_WRINKLED=SHARE: the share of organic and smooth shapes with fine wrinkles (`agndc
 # train-data --wrinkled`, default 0.5; docs/experiments/wrinkled-training.md), its own folder too.
 # AGNDC_SHEETS=SHARE: the share of thin sheets (`agndc train-data --sheets`, default 0.15: 18 %
-# of the samples gained 3.4 points of the validation family's headroom over a control at equal
-# steps, docs/experiments/sheet-training.md), its own folder too.
+# of the samples gained 3.4 points of the validation family's headroom on centred grids over a
+# control at equal steps, docs/experiments/sheet-training.md), its own folder too.
 #
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
 # kernels, not by the GPU, docs/experiments/step-times.md):
