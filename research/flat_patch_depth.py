@@ -48,8 +48,8 @@ def main() -> None:
 
     def replaced(lattice, axis):
         layers = shipped(lattice, axis)
-        occupied = np.flatnonzero(lattice.any(axis=tuple(a for a in range(3) if a != axis)))
-        if len(occupied) and occupied[-1] - occupied[0] + 1 <= args.thin:
+        outer = flatpatches.outer_cell_layers(lattice, axis)
+        if outer[True] - outer[False] <= args.thin:  # the layers of points the shape spans
             return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":
             return {kind: np.ones_like(by_mean) for kind, by_mean in layers.items()}

@@ -397,14 +397,14 @@ def _tilt(rng) -> np.ndarray:
     return small_turn(rng, TILT_DEGREES)
 
 
-def _place(m: Manifold, rng, kind: str) -> Manifold:
-    """A signed axis permutation, then (CAD and printed: all but ``ALIGNED_SHARE``) a 1-15°
+def _place(m: Manifold, rng, kind: str, aligned_share: float = ALIGNED_SHARE) -> Manifold:
+    """A signed axis permutation, then (CAD and printed: all but ``aligned_share``) a 1-15°
     tilt, or (organic) a uniform rotation."""
     perm = _random_rotation(rng, aligned=True)
     if kind == "organic":
         turn = _random_rotation(rng, aligned=False)
     else:
-        turn = np.eye(3) if rng.random() < ALIGNED_SHARE else _tilt(rng)
+        turn = np.eye(3) if rng.random() < aligned_share else _tilt(rng)
     affine = np.zeros((3, 4))
     affine[:, :3] = turn @ perm
     return m.transform(affine)
@@ -448,11 +448,8 @@ def validation_sheet(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
         m = _sheet(rng, int(rng.integers(24, 65)))
         if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
             continue
-        perm = _random_rotation(rng, aligned=True)
-        turn = np.eye(3) if rng.random() < SHEET_ALIGNED_SHARE else _tilt(rng)
-        affine = np.zeros((3, 4))
-        affine[:, :3] = turn @ perm
-        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
+        m = _place(m, rng, "cad", aligned_share=SHEET_ALIGNED_SHARE)
+        vertices, faces = _to_arrays(_drop_slivers(m))
         if _edge_manifold(faces):
             return "cad", "sheet", vertices, faces
     raise RuntimeError(f"sheet seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
