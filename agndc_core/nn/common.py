@@ -90,7 +90,10 @@ def cell_surface(q_corners: torch.Tensor) -> torch.Tensor:
     Returns:
         (...) bool.
     """
-    best = [q_corners[..., list(idx), a].amax(-1) for a, idx in enumerate(CELL_EDGE_CORNERS)]
+    # basic indexing corner by corner, not a list index: the same maxima, and a step that
+    # torch.compile's inductor lowers (it fails on the list index in a compiled training step)
+    best = [torch.stack([q_corners[..., i, a] for i in idx], -1).amax(-1)
+            for a, idx in enumerate(CELL_EDGE_CORNERS)]
     return torch.stack(best, -1).amax(-1) > 0.5
 
 

@@ -107,10 +107,18 @@ class AGNDCLoss(nn.Module):
     def forward(self, pred, vertex, edge, surface, valid=None, quadric=None
                 ) -> tuple[torch.Tensor, dict]:
         """Total loss and its parts ({"vertex", "edge", "lambda"}, detached floats)."""
+        total, parts = self.terms(pred, vertex, edge, surface, valid, quadric)
+        return total, {k: float(v) for k, v in parts.items()}
+
+    def terms(self, pred, vertex, edge, surface, valid=None, quadric=None
+              ) -> tuple[torch.Tensor, dict]:
+        """``forward`` with the parts as detached 0-d tensors: no host sync, so a training
+        step can run ahead of the GPU (and be traced whole by torch.compile)."""
         loss_v, loss_e = vertex_edge_losses(pred, vertex, edge, surface, valid, quadric,
                                             self.quadric_floor)
-        parts = {"vertex": float(loss_v.detach()), "edge": float(loss_e.detach()),
-                 "lambda": float(self.weight.detach()) if self.train_edges else 0.0}
+        parts = {"vertex": loss_v.detach(), "edge": loss_e.detach(),
+                 "lambda": self.weight.detach() if self.train_edges
+                 else torch.zeros((), device=pred.device)}
         if not self.train_edges:
             return loss_v, parts
         total = loss_v + self.weight * loss_e + self.t

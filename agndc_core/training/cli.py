@@ -59,6 +59,10 @@ def add_train_parser(sub) -> None:
     p.add_argument("--device", default="cpu", help="cpu, cuda, cuda:1, ...")
     p.add_argument("--no-amp", action="store_true", help="no bf16 autocast on CUDA")
     p.add_argument("--workers", type=int, default=0, help="data-loader processes building crops")
+    p.add_argument("--compile", default="", metavar="MODE", help="torch.compile each scale's "
+                   "step: reduce-overhead (CUDA graphs of generated kernels) or cudagraphs (of "
+                   "the eager kernels) for a GPU, where a width-16 step is bound by kernel "
+                   "launches; inductor; aot_eager checks the trace on the CPU")
     p.add_argument("--init", help="warm start from this checkpoint (.safetensors)")
     p.add_argument("--init-matching", action="store_true", help="--init may differ from "
                    "--model in the ablation switches (levels, use_attention, use_snake, "
@@ -152,7 +156,7 @@ def _cmd_train(args) -> int:
                       else None, model=model, steps=_ints(args.steps), crop=_ints(args.crop),
                       batch=args.batch, lr=args.lr, seed=args.seed, threads=args.threads,
                       margin=_ints(args.margin), device=args.device, amp=not args.no_amp,
-                      workers=args.workers, init=args.init,
+                      workers=args.workers, compile=args.compile, init=args.init,
                       init_matching=args.init_matching, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
                       ema=args.ema, outside_crops=args.outside_crops,

@@ -36,6 +36,9 @@ log = logging.getLogger(__name__)
 #: largest file the trainer writes (state shards included): under the 16 MiB a file returned from
 #: the GPU machine of the runbook may have (docs/training.md)
 MAX_FILE_BYTES = 15 * 2**20
+#: ``TrainConfig.compile`` modes and their torch.compile arguments
+COMPILE_MODES = {"inductor": {}, "reduce-overhead": {"mode": "reduce-overhead"},
+                 "cudagraphs": {"backend": "cudagraphs"}, "aot_eager": {"backend": "aot_eager"}}
 
 
 @dataclass
@@ -61,6 +64,13 @@ class TrainConfig:
     device: str = "cpu"  # "cpu", "cuda", "cuda:1", ...
     amp: bool = True  # bf16 autocast on CUDA (ignored on the CPU)
     workers: int = 0  # data-loader worker processes building crops (0: in the main process)
+    # torch.compile the trained scale's forward + loss and the frozen coarser scales' forward:
+    # "" (eager), "inductor", "reduce-overhead" (inductor + CUDA graphs), "cudagraphs" (CUDA
+    # graphs of the eager kernels, no code generation) or "aot_eager" (traced, eager kernels:
+    # a CPU check of the trace). A width-16 step on a GPU is bound by launching hundreds of small
+    # kernels (docs/experiments/step-times.md); CUDA graphs launch them as one. Not saved with
+    # the weights: a run may be resumed with another mode
+    compile: str = ""
     # warm start: a checkpoint (.safetensors) of the same architecture whose weights start the
     # run; if it predicted absolute offsets (no surface nets prior), its finest last vertex
     # layer restarts at zero so the run starts exactly at surface nets
@@ -117,6 +127,8 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         torch.set_num_threads(cfg.threads)
         self.device = torch.device(cfg.device)
+        if cfg.compile and cfg.compile not in COMPILE_MODES:
+            raise AGNDCError(f"--compile {cfg.compile!r}: one of {', '.join(COMPILE_MODES)}")
         if self.device.type == "cuda" and not torch.cuda.is_available():
             raise AGNDCError(f"--device {cfg.device}: this torch build sees no CUDA device")
         self.model = AGNDCCascade(self.model_config).to(self.device)
@@ -142,6 +154,8 @@ class Trainer:
         self.seconds = 0.0
         # of which waiting for the next batch: how much of a step the crop builders set
         self.data_seconds = 0.0
+        self._compiled_fns: dict = {}  # (role, scale) -> compiled function (cfg.compile)
+        self._compiled_scales: set = set()  # scales whose compiled step has run once
 
     def _warm_start(self, path: str) -> None:
         from ..checkpoint import load_checkpoint
@@ -183,8 +197,11 @@ class Trainer:
         if self.ema is None:
             return
         with torch.no_grad():
-            for k, p in self.model.nets[s].named_parameters():
-                self.ema[k].lerp_(p.detach(), 1.0 - self.cfg.ema)
+            # one multi-tensor kernel instead of one per tensor (the same values on the CPU)
+            names = list(self.ema)
+            params = dict(self.model.nets[s].named_parameters())
+            torch._foreach_lerp_([self.ema[k] for k in names],
+                                 [params[k].detach() for k in names], 1.0 - self.cfg.ema)
 
     @contextlib.contextmanager
     def averaged(self):
@@ -233,16 +250,38 @@ class Trainer:
 
     def predict_coarser(self, s: int, g: list) -> torch.Tensor | None:
         """P_{s+1} of the frozen coarser networks on the crop's coarser inputs."""
-        levels = self.model_config.levels
-        if s == levels:
+        if s == self.model_config.levels:
             return None
-        p = None
         with torch.no_grad():
-            for t in reversed(range(s + 1, levels + 1)):
-                with self._autocast():
-                    p = self.model.forward_scale(t, g[t - s], p)
-                p = p.float()
+            return self._compiled("coarser", s, self._predict_coarser)(s, g)
+
+    def _predict_coarser(self, s: int, g: list) -> torch.Tensor:
+        p = None
+        for t in reversed(range(s + 1, self.model_config.levels + 1)):
+            with self._autocast():
+                p = self.model.forward_scale(t, g[t - s], p)
+            p = p.float()
         return p
+
+    def _scale_loss(self, s: int, g: torch.Tensor, coarser, vertex, edge, scored, valid,
+                    quadric) -> tuple[torch.Tensor, dict]:
+        """Scale s's loss and its parts (0-d tensors) on one batch: what ``cfg.compile``
+        traces, so it takes tensors only."""
+        with self._autocast():
+            pred = self.model.forward_scale(s, g, coarser)
+        return self.losses[s].terms(pred.float(), vertex, edge, scored, valid, quadric)
+
+    def _compiled(self, role: str, s: int, fn):
+        """``fn`` itself, or once per (role, scale) its torch.compile'd form (``cfg.compile``)."""
+        mode = self.cfg.compile
+        if not mode:
+            return fn
+        key = (role, s)
+        if key not in self._compiled_fns:
+            # every batch of a scale has one shape: no dynamic shapes, and no graph breaks
+            self._compiled_fns[key] = torch.compile(fn, fullgraph=True, dynamic=False,
+                                                    **COMPILE_MODES[mode])
+        return self._compiled_fns[key]
 
     def _autocast(self):
         use = self.cfg.amp and self.device.type == "cuda"
@@ -253,21 +292,48 @@ class Trainer:
             batch = self.batch(s, step)
         batch = {k: ([t.to(self.device, non_blocking=True) for t in v] if isinstance(v, list)
                      else v.to(self.device, non_blocking=True)) for k, v in batch.items()}
-        coarser = self.predict_coarser(s, batch["g"])
         self.model.nets[s].train()
         for group in self.optimizer.param_groups:
             group["lr"] = self._lr(s, step)
-        with self._autocast():
-            pred = self.model.forward_scale(s, batch["g"][0], coarser)
-        loss, parts = self.losses[s](pred.float(), batch["vertex"], batch["edge"],
-                                     batch["surface"] & batch["valid"], batch["valid"],
-                                     batch.get("quadric"))
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
+        try:
+            loss, parts = self._loss_and_gradients(s, batch)
+        except Exception as exc:  # compilers fail with many exception types
+            if not self.cfg.compile or s in self._compiled_scales:
+                raise
+            self._compile_failed(s, exc)
+            loss, parts = self._loss_and_gradients(s, batch)
+        if self.cfg.compile:
+            self._compiled_scales.add(s)
         torch.nn.utils.clip_grad_norm_(self.model.nets[s].parameters(), 1.0)
         self.optimizer.step()
         self._update_ema(s)
-        return {"loss": float(loss.detach()), **parts}
+        # detached 0-d tensors, copied out of any CUDA graph's buffers: float() them when
+        # logging, so the step does not wait for the GPU
+        return {k: v.detach().clone() for k, v in {"loss": loss, **parts}.items()}
+
+    def _loss_and_gradients(self, s: int, batch: dict) -> tuple[torch.Tensor, dict]:
+        """Forward, loss and backward of one batch (the weights are not touched yet)."""
+        if self.cfg.compile:
+            # CUDA graphs (reduce-overhead) may reuse the last step's buffers from here on
+            torch.compiler.cudagraph_mark_step_begin()
+        coarser = self.predict_coarser(s, batch["g"])
+        loss, parts = self._compiled("loss", s, self._scale_loss)(
+            s, batch["g"][0], coarser, batch["vertex"], batch["edge"],
+            batch["surface"] & batch["valid"], batch["valid"], batch.get("quadric"))
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        return loss, parts
+
+    def _compile_failed(self, s: int, exc: Exception) -> None:
+        """A scale's first compiled step failed: train on eagerly rather than lose the run (a
+        GPU machine's window is minutes), and say so in the log and the checkpoint's record."""
+        log.warning("--compile %s failed on scale %d, training on eagerly: %s: %s",
+                    self.cfg.compile, s, type(exc).__name__, str(exc)[:500])
+        self.cfg.compile = ""
+        self._compiled_fns.clear()
+        if self.sessions:
+            self.sessions[-1]["hardware"] = _hardware(self.device, self.cfg)
+            self.sessions[-1]["compile_error"] = f"{type(exc).__name__}: {str(exc)[:300]}"
 
     # ------------------------------------------------------------------ loop
     def run(self, progress: bool = True) -> Path | None:
@@ -303,7 +369,8 @@ class Trainer:
                     entry = {"scale": s, "step": self.step, "seconds": round(self.seconds, 1),
                              "data_seconds": round(self.data_seconds, 1),
                              "lr": self._lr(s, self.step - 1),
-                             **{k: float(np.mean([w[k] for w in window])) for k in window[0]}}
+                             **{k: float(np.mean([float(w[k]) for w in window]))
+                                for k in window[0]}}
                     self.log.append(entry)
                     bar.set_postfix(v=f"{entry['vertex']:.4f}", e=f"{entry['edge']:.4f}")
                     window = []
@@ -500,7 +567,8 @@ def _hardware(device: torch.device, cfg: TrainConfig) -> str:
         where = torch.cuda.get_device_name(device) + (", bf16 autocast" if cfg.amp else "")
     else:
         where = f"CPU, {cfg.threads} threads"
-    return f"{where}, torch {torch.__version__}, {cfg.workers} data workers"
+    compiled = f", torch.compile {cfg.compile}" if cfg.compile else ""
+    return f"{where}, torch {torch.__version__}{compiled}, {cfg.workers} data workers"
 
 
 def _load_folder(folder, levels: int, workers: int = 0) -> list[SparseSample]:

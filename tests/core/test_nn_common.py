@@ -8,6 +8,7 @@ import itertools
 import math
 
 import numpy as np
+import pytest
 import torch
 
 from agndc_core.grid import scale_lattice
@@ -124,3 +125,37 @@ def test_child_prediction_keeps_the_coarse_vertex_in_place():
             np.testing.assert_allclose(child_cell + out[:3].numpy(), fine_position, atol=1e-9)
             np.testing.assert_allclose(out[3:].numpy(), torch.sigmoid(p[3:]).numpy())
         assert torch.all(child_prediction(p, torch.tensor(False), torch.tensor(child)) == 0)
+
+
+@pytest.mark.parametrize("lows, highs", [((1, 1, 1), (1, 1, 1)), ((0, 2, 1), (3, 0, 1)),
+                                         ((0, 0, 0), (1, 1, 1))])
+def test_replicate_padding_under_torch_compile_is_f_pad(lows, highs):
+    """Traced, ``replicate_pad`` concatenates border planes; the values are F.pad's."""
+    import torch.nn.functional as F
+
+    from agndc_core.nn.dense_ops import replicate_pad
+
+    x = torch.randn(2, 3, 4, 5, 6)
+    pads = [p for lo, hi in reversed(list(zip(lows, highs))) for p in (lo, hi)]
+    expected = F.pad(x, pads, mode="replicate")
+    assert torch.equal(replicate_pad(x, lows, highs), expected)
+    traced = torch.compile(lambda t: replicate_pad(t, lows, highs), backend="aot_eager",
+                           fullgraph=True)
+    assert torch.equal(traced(x), expected)
+
+
+def test_inductor_compiles_a_convolution_of_the_upsampled_prediction():
+    """The pattern inductor failed on (a replicate-padded convolution of the sparse
+    up-sampling), compiled to generated code, against eager."""
+    from agndc_core.nn.dense_ops import DenseOps
+
+    torch.manual_seed(0)
+    ops, conv = DenseOps((8, 8, 8)), torch.nn.Conv3d(6, 4, 3)
+    p = torch.randn(2, 4, 4, 4, 6)
+
+    def conv_of_upsampled(p):
+        return ops.conv(ops.upsample_prediction(p), conv)
+
+    with torch.no_grad():
+        compiled = torch.compile(conv_of_upsampled, backend="inductor", fullgraph=True)
+        torch.testing.assert_close(compiled(p), conv_of_upsampled(p))

@@ -622,3 +622,60 @@ def test_distilled_samples_take_the_teachers_finest_vertices(data_dir, tmp_path)
     np.testing.assert_array_equal(distilled["vertex0"][~surface], source["vertex0"][~surface])
     with pytest.raises(AGNDCError, match="teacher weight"):
         distil_dataset(data_dir, tmp_path / "bad", teacher, weight=1.5, progress=False)
+
+
+def test_a_compiled_step_is_traced_whole_and_trains_as_eager(data_dir, tmp_path):
+    """``--compile`` traces each scale's forward + loss and the frozen coarser scales as whole
+    graphs (a graph break fails: fullgraph). ``aot_eager`` runs the eager kernels on that
+    trace: the same first loss, and the same steps up to the order in which the traced
+    replicate padding sums its gradient."""
+    runs = {}
+    for mode in ("", "aot_eager"):
+        cfg = _config(data_dir, tmp_path / (mode or "eager"))
+        cfg.compile, cfg.ema = mode, 0.9
+        trainer = Trainer(cfg)
+        trainer.scale, trainer.optimizer = 0, trainer._optimizer(0)
+        trainer.ema = trainer._start_ema(0)
+        losses = [float(trainer.train_step(0, step)["loss"]) for step in range(3)]
+        runs[mode] = losses, trainer
+    (eager_losses, eager), (traced_losses, traced) = runs[""], runs["aot_eager"]
+    assert set(traced._compiled_fns) == {("coarser", 0), ("loss", 0)}
+    assert eager_losses[0] == traced_losses[0]
+    np.testing.assert_allclose(traced_losses, eager_losses, rtol=1e-4)
+    for (name, a), b in zip(eager.model.nets[0].state_dict().items(),
+                            traced.model.nets[0].state_dict().values()):
+        # Adam's normalised steps (3e-3 each) carry the summation order's ~1e-7 as ~1e-6
+        torch.testing.assert_close(b, a, rtol=1e-4, atol=1e-5, msg=name)
+    for name in eager.ema:
+        torch.testing.assert_close(traced.ema[name], eager.ema[name], rtol=1e-4, atol=1e-5)
+
+
+def test_an_unknown_compile_mode_is_a_clear_error(data_dir, tmp_path):
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.compile = "fast"
+    with pytest.raises(AGNDCError, match="reduce-overhead"):
+        Trainer(cfg)
+
+
+def test_a_compile_that_fails_trains_on_eagerly_and_says_so(data_dir, tmp_path, monkeypatch):
+    """A compiler error at a scale's first step (a GPU machine's window is minutes) falls back
+    to eager steps, the same as a run without --compile, and the run's record says so."""
+    def broken_compile(fn, **options):
+        def compiled(*args, **kwargs):
+            raise RuntimeError("no compiler here")
+        return compiled
+
+    eager = Trainer(_config(data_dir, tmp_path / "eager"))
+    eager.run(progress=False)
+    monkeypatch.setattr(train_module.torch, "compile", broken_compile)
+    cfg = _config(data_dir, tmp_path / "fallback")
+    cfg.compile = "reduce-overhead"
+    fallback = Trainer(cfg)
+    fallback.run(progress=False)
+    for (name, a), b in zip(eager.model.state_dict().items(),
+                            fallback.model.state_dict().values()):
+        assert torch.equal(a, b), name
+    info = json.loads((tmp_path / "fallback" / "run.json").read_text())
+    assert info["config"]["compile"] == ""
+    assert "no compiler here" in info["sessions"][0]["compile_error"]
+    assert "torch.compile" not in info["sessions"][0]["hardware"]
