@@ -21,6 +21,10 @@
 # AGNDC_SHEETS=SHARE: the share of thin sheets (`agndc train-data --sheets`, default 0.15: 18 %
 # of the samples gained 3.4 points of the validation family's headroom on centred grids over a
 # control at equal steps, docs/experiments/sheet-training.md), its own folder too.
+# AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
+# workers), benchmarks/bench_training_throughput.py times those variants (eager or a
+# `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
+# writes $OUT/throughput.txt (at most AGNDC_BENCH_SECONDS, default 240).
 #
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
 # kernels, not by the GPU, docs/experiments/step-times.md):
@@ -117,6 +121,20 @@ for name in $names; do
     if startable "$name"; then need=1; fi
 done
 if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
+    if [ -n "${AGNDC_BENCH:-}" ]; then
+        # the data in the background on 12 cores; the benchmark's launching thread gets its own
+        if ! alive "$genpid"; then
+            setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions \
+                "$resolutions" --wrinkled "$wrinkled" --sheets "$sheets" \
+                -n "${AGNDC_SAMPLES:-5000}" --workers 12 >/tmp/agndc_runs/datagen.log 2>&1 \
+                </dev/null &
+            echo $! >"$genpid"
+        fi
+        timeout "${AGNDC_BENCH_SECONDS:-240}" "$py" benchmarks/bench_training_throughput.py \
+            --data "$data/val" --device "${AGNDC_BENCH_DEVICE:-cuda}" --variants "$AGNDC_BENCH" \
+            --steps 20 --warmup 3 --threads 2 2>&1 | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" \
+            || true
+    fi
     while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$train" --resolutions "$resolutions" --wrinkled "$wrinkled" \
         --sheets "$sheets" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
