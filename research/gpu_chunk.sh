@@ -9,7 +9,8 @@
 # training between calls while the machine runs. Its run folder is /tmp/agndc_runs/RUN, seeded
 # from runs/RUN sent with the call (the state of an earlier machine) when it is new. Every call
 # then waits SECONDS (or until the trainer exits), copies run.json, the state shards (<= 15 MiB
-# each), final.* and the log to $OUT, and prints the log's tail. Later calls on the same machine
+# each), final.*, the log and steps.tar (the --val-steps checkpoints) to $OUT, and prints the
+# log's tail. Later calls on the same machine
 # only wait and copy (their train options are ignored); on a fresh machine they resume. A call
 # without train options never starts a trainer; none starts once final.safetensors exists.
 # Send `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
@@ -52,6 +53,18 @@ fi
 export PYTHONUNBUFFERED=1
 agndc() { "$py" -m agndc_core.cli "$@"; }
 alive() { [ -f "$1" ] && kill -0 "$(cat "$1")" 2>/dev/null; }  # the process of a pid file
+# tar_out NAME DIR FILES...: $OUT/NAME.tar of DIR's FILES. A file comes back only under 16 MiB:
+# a larger tar (a wide model's state) comes back in parts, NAME.tar.part0, part1, ... (`cat
+# NAME.tar.part* > NAME.tar`); at most 8 files come back in all
+tar_out() {
+    local name=$1 dir=$2
+    shift 2
+    (cd "$dir" && tar -cf "$OUT/$name.tar" "$@")
+    if [ "$(stat -c %s "$OUT/$name.tar")" -ge $(( 16 * 1024 * 1024 )) ]; then
+        split -b $(( 15 * 1024 * 1024 )) -d -a 1 "$OUT/$name.tar" "$OUT/$name.tar.part"
+        rm "$OUT/$name.tar"
+    fi
+}
 data=/tmp/agndc_data
 resolutions=${AGNDC_RESOLUTIONS:-32,128}
 wrinkled=${AGNDC_WRINKLED:-0.5}
@@ -156,17 +169,16 @@ for name in $names; do
         cp "$work"/run.json "$OUT"/ 2>/dev/null || true
         cp "$work"/state-*.safetensors "$work"/train.log "$OUT"/ 2>/dev/null || true
         cp "$work"/final.* "$OUT"/ 2>/dev/null || true
-    elif [ -n "${OUT:-}" ]; then
-        files=$(cd "$work" && ls run.json train.log final.* state-*.safetensors 2>/dev/null || true)
-        # shellcheck disable=SC2086
-        (cd "$work" && tar -cf "$OUT/$name.tar" $files)
-        # a file comes back only under 16 MiB: a larger tar (a wide model's state) comes back
-        # in parts, RUN.tar.part0, part1, ... (`cat RUN.tar.part* > RUN.tar`); at most 8
-        # files come back in all
-        if [ "$(stat -c %s "$OUT/$name.tar")" -ge $(( 16 * 1024 * 1024 )) ]; then
-            split -b $(( 15 * 1024 * 1024 )) -d -a 1 "$OUT/$name.tar" "$OUT/$name.tar.part"
-            rm "$OUT/$name.tar"
+        # the --val-steps checkpoints, in one file (at most 8 files come back)
+        if compgen -G "$work/step-*" >/dev/null; then
+            # shellcheck disable=SC2046
+            tar_out steps "$work" $(cd "$work" && ls step-*)
         fi
+    elif [ -n "${OUT:-}" ]; then
+        files=$(cd "$work" && ls run.json train.log final.* step-* state-*.safetensors \
+            2>/dev/null || true)
+        # shellcheck disable=SC2086
+        tar_out "$name" "$work" $files
     fi
     alive "/tmp/agndc_runs/$name.pid" && echo "$name: trainer running" \
         || echo "$name: trainer not running"
