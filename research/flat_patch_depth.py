@@ -35,6 +35,10 @@ def main() -> None:
                         choices=["shipped", "mean", "midpoint", "outer-midpoint"])
     parser.add_argument("--thin", type=int, default=0, help="midpoint on the outermost layers "
                         "too along an axis where the shape is at most this many voxels thick")
+    parser.add_argument("--symmetric-thin", type=int, default=0, help="along an axis where the "
+                        "whole shape is at most this many voxels thick, keep the network's "
+                        "thickness between its two outermost flat faces but centre them on the "
+                        "voxel slab (their common shift removed)")
     parser.add_argument("--methods", default="agndc")
     parser.add_argument("--res", type=int, default=64)
     parser.add_argument("--shifts", type=int, default=0)
@@ -60,6 +64,33 @@ def main() -> None:
         return layers
 
     flatpatches.mean_depth_layers = replaced  # flatten_patches looks it up on every call
+    if args.symmetric_thin:
+        flatten = flatpatches.flatten_patches
+
+        def centred(lattice, vertex, *, in_place=False, pinned=None):
+            mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
+            before = mine.copy()
+            out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+            for axis in range(3):
+                outer = flatpatches.outer_cell_layers(lattice, axis)
+                if not 0 < outer[True] - outer[False] <= args.symmetric_thin:
+                    continue
+                coord = np.moveaxis(out[..., axis], axis, -1)
+                written = np.moveaxis(mine[..., axis] & ~before[..., axis], axis, -1)
+                sides = [written[..., outer[kind]] for kind in (False, True)]
+                if not all(side.any() for side in sides):
+                    continue  # a face of the slab is not flat: nothing to centre
+                # the two faces' mean departures from their layers' midpoints: their mean is
+                # the common shift, their difference the network's thickness
+                shift = np.mean([(coord[..., outer[kind]][side] - flatpatches.MIDPOINT).mean()
+                                 for kind, side in zip((False, True), sides)])
+                for kind, side in zip((False, True), sides):
+                    layer = coord[..., outer[kind]]
+                    layer[side] = np.clip(layer[side] - shift, 0.0, 1.0)
+                    coord[..., outer[kind]] = layer
+            return out
+
+        flatpatches.flatten_patches = centred
     agndc(["eval", args.data, "--methods", args.methods, "--res", str(args.res), "--samples",
            str(args.samples), "--shifts", str(args.shifts), "-o", args.out])
 
