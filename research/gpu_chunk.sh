@@ -10,9 +10,9 @@
 # from runs/RUN sent with the call (the state of an earlier machine) when it is new. Every call
 # then waits SECONDS (or until the trainer exits), copies run.json, the state shards (<= 15 MiB
 # each), final.*, the log and steps.tar (the --val-steps checkpoints) to $OUT, and prints the
-# log's tail. Later calls on the same machine
-# only wait and copy (their train options are ignored); on a fresh machine they resume. A call
-# without train options never starts a trainer; none starts once final.safetensors exists.
+# log's tail. Later calls on the same machine only wait and copy (their train options are
+# ignored); on a fresh machine they resume. A call without train options never starts a
+# trainer; none starts once final.safetensors exists.
 # Send `.whl` and `runs/RUN`; copy the returned files into runs/RUN after each call.
 # AGNDC_SMOKE=1: instead, a 30+10+10-step run on the held-out samples (checks CUDA, prints step time).
 # AGNDC_RESOLUTIONS=LO,HI: the training shapes' voxels on their longest side (default 32,128);
