@@ -291,15 +291,25 @@ def _models_table(methods) -> str:
                      + (f", snake kernel {config['snake_kernel']}" if config.get("use_snake")
                         else "") + (f", off: {', '.join(switches)}" if switches else ""))
         training = meta.get("training", {})
-        steps = "/".join(str(s) for s in training.get("steps_per_scale", []))
-        scales = "/".join(str(s) for s in range(len(training.get("steps_per_scale", []))))
         data = training.get("data", {})
         lines.append(f"| {method} | `{path.name}` | {described} | {meta['parameters']:,} | "
-                     f"{path.stat().st_size / 2 ** 20:.2f} MiB | {steps} steps at scales "
-                     f"{scales}, {data.get('samples', '?')} shapes, "
+                     f"{path.stat().st_size / 2 ** 20:.2f} MiB | {_steps_trained(training)}, "
+                     f"{data.get('samples', '?')} shapes, "
                      f"{training.get('train_seconds', 0) / 60:.0f} min on "
                      f"{_trained_on(training)}{_lineage_total(training)} |")
     return "\n".join(lines)
+
+
+def _steps_trained(training: dict) -> str:
+    """"3000/300/300 steps at scales 0/1/2"; "2000 of 4000/0/0 ..." for a checkpoint taken
+    during the finest scale's schedule (``--val-steps``), whose learning rate was mid-decay."""
+    per_scale = training.get("steps_per_scale", [])
+    steps = "/".join(str(s) for s in per_scale)
+    scales = "/".join(str(s) for s in range(len(per_scale)))
+    done = training.get("steps_done", {})
+    if per_scale and done.get("scale") == 0 and done.get("step", per_scale[0]) < per_scale[0]:
+        steps = f"{done['step']} of {steps}"
+    return f"{steps} steps at scales {scales}"
 
 
 def _trained_on(training: dict) -> str:

@@ -256,6 +256,16 @@ def test_models_table_says_where_the_weights_were_trained():
     assert _trained_on(resumed) == "CPU + NVIDIA H200"
 
 
+def test_models_table_says_when_the_weights_are_a_checkpoint_mid_schedule():
+    from agndc_core.study.report import _steps_trained
+
+    final = {"steps_per_scale": [3000, 300, 300], "steps_done": {"scale": 0, "step": 3000}}
+    assert _steps_trained(final) == "3000/300/300 steps at scales 0/1/2"
+    middle = {"steps_per_scale": [4000, 0, 0], "steps_done": {"scale": 0, "step": 2000}}
+    assert _steps_trained(middle) == "2000 of 4000/0/0 steps at scales 0/1/2"
+    assert _steps_trained({"steps_per_scale": [2300]}) == "2300 steps at scales 0"
+
+
 @pytest.mark.slow
 def test_demo_the_readme_opens_with(tmp_path, capsys):
     """``agndc demo`` (the README's first command, at a small size): every method's mesh, the
