@@ -51,7 +51,7 @@ def run_variant(args, mode: str, batch_size: int, batches: dict, out: str) -> di
                       model={"width": args.width, "snake_kernel": 5, "band_radius": 4,
                              "surface_nets_prior": False})
     trainer = Trainer(cfg)
-    trainer.scale, trainer.optimizer, trainer.ema = 0, trainer._optimizer(0), trainer._start_ema(0)
+    trainer.begin_scale(0)
     if batch_size not in batches:
         start = time.perf_counter()
         built = [trainer.batch(0, k) for k in range(args.distinct)]

@@ -85,9 +85,8 @@ def main() -> None:
                 shift = np.mean([(coord[..., outer[kind]][side] - flatpatches.MIDPOINT).mean()
                                  for kind, side in zip((False, True), sides)])
                 for kind, side in zip((False, True), sides):
-                    layer = coord[..., outer[kind]]
+                    layer = coord[..., outer[kind]]  # a view into out
                     layer[side] = np.clip(layer[side] - shift, 0.0, 1.0)
-                    coord[..., outer[kind]] = layer
             return out
 
         flatpatches.flatten_patches = centred

@@ -73,14 +73,18 @@ train="$data/train_${resolutions/,/-}_w${wrinkled}_s$sheets"
 mkdir -p /tmp/agndc_runs
 agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
+# start_datagen WORKERS: the training data generated in the background (unless it already is);
+# wait for it with `alive "$genpid"`
+start_datagen() {
+    alive "$genpid" && return 0
+    setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
+        --wrinkled "$wrinkled" --sheets "$sheets" -n "${AGNDC_SAMPLES:-5000}" --workers "$1" \
+        >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
+    echo $! >"$genpid"
+}
 if [ -n "${AGNDC_SMOKE:-}" ]; then
     # the training data is generated in the background meanwhile, for the next call
-    if ! alive "$genpid"; then
-        setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
-            --wrinkled "$wrinkled" --sheets "$sheets" -n "${AGNDC_SAMPLES:-5000}" --workers 14 \
-            >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
-        echo $! >"$genpid"
-    fi
+    start_datagen 14
     rm -rf /tmp/agndc_smoke
     agndc train --data "$data/val" -o /tmp/agndc_smoke --device cuda --workers 8 --threads 4 \
         --steps 30,10,10 "$@" 2>&1 | tr '\r' '\n' >/tmp/agndc_runs/smoke.log || true
@@ -136,13 +140,7 @@ done
 if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     if [ -n "${AGNDC_BENCH:-}" ]; then
         # the data in the background on 12 cores; the benchmark's launching thread gets its own
-        if ! alive "$genpid"; then
-            setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions \
-                "$resolutions" --wrinkled "$wrinkled" --sheets "$sheets" \
-                -n "${AGNDC_SAMPLES:-5000}" --workers 12 >/tmp/agndc_runs/datagen.log 2>&1 \
-                </dev/null &
-            echo $! >"$genpid"
-        fi
+        start_datagen 12
         timeout "${AGNDC_BENCH_SECONDS:-240}" "$py" benchmarks/bench_training_throughput.py \
             --data "$data/val" --device "${AGNDC_BENCH_DEVICE:-cuda}" --variants "$AGNDC_BENCH" \
             --steps 20 --warmup 3 --threads 2 2>&1 | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" \

@@ -183,6 +183,12 @@ class Trainer:
             self.model._init_outputs(self.model.nets[0], snakes=False)
 
     # ------------------------------------------------------------------ schedule
+    def begin_scale(self, s: int) -> None:
+        """Train scale s from its first step: a fresh optimiser and weight average for its net."""
+        self.scale, self.step = s, 0
+        self.optimizer = self._optimizer(s)
+        self.ema = self._start_ema(s)
+
     def _optimizer(self, s: int):
         params = list(self.model.nets[s].parameters()) + list(self.losses[s].parameters())
         return torch.optim.AdamW(params, lr=self.cfg.lr, weight_decay=1e-4)
@@ -350,9 +356,7 @@ class Trainer:
             if s > self.scale:
                 continue  # finished before a resume
             if s < self.scale:
-                self.scale, self.step = s, 0
-                self.optimizer = self._optimizer(s)
-                self.ema = self._start_ema(s)
+                self.begin_scale(s)
             total = self.cfg.steps[s]
             bar = tqdm(total=total, initial=self.step, desc=f"scale {s}", disable=not progress)
             window: list[dict] = []
