@@ -12,8 +12,10 @@
 # 6,000 steps on the same data at a quarter of the learning rate with a slower EMA; stage 5:
 # the shipped AGNDC continued 1,500 steps on DATA plus 200 thin sheets (DATA_sheets, agndc
 # train-data --sheets 1.0; docs/experiments/sheet-training.md); stage 6: its step 1,000 (its
-# best on the validation family) continued 4,000 steps at half the learning rate. Stages 5-6 run
-# before stage 4, which waits with its state where it stopped. Pause it
+# best on the validation family) continued 4,000 steps at half the learning rate; stage 7: stage
+# 6's step 2,000 (shipped as agndc) continued 4,000 steps on DATA, the sheets and the wrinkled
+# shapes together, at a lower learning rate and a slower EMA. Stages 5-7 run before stage 4,
+# which waits with its state where it stopped. Pause it
 # for a benchmark with kill -STOP / kill -CONT on the `agndc train` process.
 # With a third argument `undc`: the lineage's UNDC twin instead (the same data, steps, seeds and
 # curriculum), the baseline of the AGNDC-against-UNDC comparison in docs/training.md.
@@ -69,6 +71,9 @@ stage sh_agndc16 --data "$data,$sheets" --init agndc_core/weights/agndc.safetens
 stage sh_agndc16_cont --data "$data,$sheets" --init "$runs/sh_agndc16/step-001000.safetensors" \
     --model "$shipped_config" --lr 5e-5 --ema 0.995 --seed 10 --steps 4000,0,0 \
     --val-steps 1000,2000,3000,4000
+stage mix_agndc16 --data "$data,$sheets,$wrinkled" \
+    --init "$runs/sh_agndc16_cont/step-002000.safetensors" --model "$shipped_config" \
+    --lr 3e-5 --ema 0.999 --seed 13 --steps 4000,0,0 --val-steps 1000,2000,3000,4000
 stage wr_agndc16_low --data "$wrinkled" --init "$runs/wr_agndc16/step-002000.safetensors" \
     --model '{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}' \
     --lr 5e-5 --ema 0.999 --seed 8 --steps 6000,0,0 --val-steps 1000,2000,3000,4000,5000,6000
