@@ -10,7 +10,8 @@ rule replaced:
 * ``outer-midpoint``: the reverse of the shipped rule;
 
 and ``--thin N`` puts the outermost patches at the midpoint as well along an axis where the
-whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --sheets``).
+whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --sheets``),
+``--far N`` along an axis where it spans more than N voxels.
 
     .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
     .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
@@ -35,6 +36,8 @@ def main() -> None:
                         choices=["shipped", "mean", "midpoint", "outer-midpoint"])
     parser.add_argument("--thin", type=int, default=0, help="midpoint on the outermost layers "
                         "too along an axis where the shape is at most this many voxels thick")
+    parser.add_argument("--far", type=int, default=0, help="midpoint on the outermost layers "
+                        "too along an axis where the shape spans more than this many voxels")
     parser.add_argument("--symmetric-thin", type=int, default=0, help="along an axis where the "
                         "whole shape is at most this many voxels thick, keep the network's "
                         "thickness between its two outermost flat faces but centre them on the "
@@ -53,7 +56,8 @@ def main() -> None:
     def replaced(lattice, axis):
         layers = shipped(lattice, axis)
         outer = flatpatches.outer_cell_layers(lattice, axis)
-        if outer[True] - outer[False] <= args.thin:  # the layers of points the shape spans
+        span = outer[True] - outer[False]  # the layers of points the shape spans
+        if span <= args.thin or 0 < args.far < span:
             return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":
             return {kind: np.ones_like(by_mean) for kind, by_mean in layers.items()}
