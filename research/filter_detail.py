@@ -24,10 +24,9 @@ docs/experiments/normal-filter.md ("Giving detail back") has the measurements.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 import scipy.sparse as sp
+from stage_eval import eval_parser, run_eval
 
 
 def ring_average(faces: np.ndarray, n_vertices: int) -> sp.csr_matrix:
@@ -77,11 +76,7 @@ def give_detail_back(network, filtered, faces, fixed, args) -> np.ndarray:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("data", help="folder of meshes (agndc val-data)")
-    parser.add_argument("-o", "--out", required=True)
-    parser.add_argument("--res", type=int, default=64)
-    parser.add_argument("--samples", type=int, default=30_000)
+    parser = eval_parser(__doc__, methods=False)
     parser.add_argument("--rings", type=int, default=1)
     parser.add_argument("--alpha", type=float, default=1.0)
     parser.add_argument("--crease", type=float, default=30.0, help="degrees")
@@ -91,7 +86,6 @@ def main() -> None:
     args = parser.parse_args()
 
     from agndc_core import normalfilter
-    from agndc_core.cli import main as agndc
 
     plain = normalfilter.filter_mesh
 
@@ -106,8 +100,7 @@ def main() -> None:
 
     # the pipeline imports filter_mesh when it runs the stage, so it finds this one
     normalfilter.filter_mesh = filter_and_restore
-    agndc(["eval", args.data, "--methods", "agndc", "--res", str(args.res), "--samples",
-           str(args.samples), "-o", args.out])
+    run_eval(args)
 
 
 if __name__ == "__main__":

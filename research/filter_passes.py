@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 
+from stage_eval import eval_parser, run_eval
+
 
 def parse_field(text: str) -> tuple[str, object]:
     """"name=value" -> (name, value), the value typed as the ``NormalFilter`` field is."""
@@ -29,17 +31,12 @@ def parse_field(text: str) -> tuple[str, object]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("data", help="folder of meshes (agndc val-data, or the dev meshes)")
+    parser = eval_parser(__doc__, "folder of meshes (agndc val-data, or the dev meshes)",
+                         methods=False)
     parser.add_argument("fields", nargs="*", type=parse_field, help="NormalFilter FIELD=VALUE")
-    parser.add_argument("-o", "--out", required=True)
-    parser.add_argument("--res", type=int, default=64)
-    parser.add_argument("--samples", type=int, default=30_000)
-    parser.add_argument("--shifts", type=int, default=0)
     args = parser.parse_args()
 
     from agndc_core import normalfilter
-    from agndc_core.cli import main as agndc
 
     # filter_mesh's default argument was bound at import: pass the replaced parameters instead
     params = dataclasses.replace(normalfilter.DEFAULT, **dict(args.fields))
@@ -52,8 +49,7 @@ def main() -> None:
     # the pipeline imports filter_mesh when it runs the stage, so it finds this one
     normalfilter.filter_mesh = filter_with_params
     print(params)
-    agndc(["eval", args.data, "--methods", "agndc", "--res", str(args.res), "--samples",
-           str(args.samples), "--shifts", str(args.shifts), "-o", args.out])
+    run_eval(args)
 
 
 if __name__ == "__main__":

@@ -23,15 +23,12 @@ numbers.
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
+from stage_eval import eval_parser, run_eval
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("data", help="folder of meshes (agndc val-data)")
-    parser.add_argument("-o", "--out", required=True)
+    parser = eval_parser(__doc__)
     parser.add_argument("--depth", default="shipped",
                         choices=["shipped", "mean", "midpoint", "outer-midpoint"])
     parser.add_argument("--thin", type=int, default=0, help="midpoint on the outermost layers "
@@ -42,14 +39,9 @@ def main() -> None:
                         "whole shape is at most this many voxels thick, keep the network's "
                         "thickness between its two outermost flat faces but centre them on the "
                         "voxel slab (their common shift removed)")
-    parser.add_argument("--methods", default="agndc")
-    parser.add_argument("--res", type=int, default=64)
-    parser.add_argument("--shifts", type=int, default=0)
-    parser.add_argument("--samples", type=int, default=30_000)
     args = parser.parse_args()
 
     from agndc_core import flatpatches
-    from agndc_core.cli import main as agndc
 
     shipped = flatpatches.mean_depth_layers
 
@@ -94,8 +86,7 @@ def main() -> None:
             return out
 
         flatpatches.flatten_patches = centred
-    agndc(["eval", args.data, "--methods", args.methods, "--res", str(args.res), "--samples",
-           str(args.samples), "--shifts", str(args.shifts), "-o", args.out])
+    run_eval(args)
 
 
 if __name__ == "__main__":

@@ -15,9 +15,8 @@ the cell is nearer the low end of the shape's occupied box:
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
+from stage_eval import eval_parser, run_eval
 
 
 def mirrored_back(vertex_f: np.ndarray) -> np.ndarray:
@@ -41,18 +40,11 @@ def nearer_high(lattice: np.ndarray) -> list[np.ndarray]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("data")
-    parser.add_argument("-o", "--out", required=True)
-    parser.add_argument("--methods", default="agndc")
-    parser.add_argument("--res", type=int, default=64)
-    parser.add_argument("--shifts", type=int, default=0)
-    parser.add_argument("--samples", type=int, default=30_000)
+    parser = eval_parser(__doc__)
     parser.add_argument("--average", action="store_true")
     args = parser.parse_args()
 
     from agndc_core import pipeline
-    from agndc_core.cli import main as agndc
 
     predict = pipeline._predict
 
@@ -73,8 +65,7 @@ def main() -> None:
         return out
 
     pipeline._predict = both
-    agndc(["eval", args.data, "--methods", args.methods, "--res", str(args.res), "--samples",
-           str(args.samples), "--shifts", str(args.shifts), "-o", args.out])
+    run_eval(args)
 
 
 if __name__ == "__main__":
