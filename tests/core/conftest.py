@@ -33,9 +33,13 @@ def randomise_outputs(net, std=0.1, seed=1):
 
 
 def research_script(name: str):
-    """A script of ``research/`` (not a package) imported as a module, for its tests."""
+    """A script of ``research/`` (not a package) imported as a module, for its tests; its
+    sibling imports resolve as when it is run from the command line."""
     import importlib.util
+    import sys
 
+    if str(REPO / "research") not in sys.path:
+        sys.path.insert(0, str(REPO / "research"))
     spec = importlib.util.spec_from_file_location(name, REPO / "research" / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -78,3 +78,30 @@ def test_a_continued_run_counts_its_steps_on_from_the_checkpoint_it_started_from
     assert table.steps_before(runs, "cont2") == 5400
     assert table.steps_before(runs, "elsewhere") == 0
     assert table.steps_before(runs, "no_such_run") == 0
+
+
+def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
+    """mirror_border: surface nets (mirror-symmetric) on the mirrored lattice, mapped back,
+    gives the same vertex in every cell the surface crosses; cells nearer the high end of the
+    occupied box are counted per axis."""
+    import numpy as np
+    from scipy import ndimage
+
+    from agndc_core.grid import pad_to_lattice
+    from agndc_core.surfacenets import surface_nets_lattice
+
+    mirror = research_script("mirror_border")
+    field = ndimage.gaussian_filter(np.random.default_rng(0).random((20, 17, 13)), 2)
+    lattice = pad_to_lattice(field > 0.5)
+    flipped = np.ascontiguousarray(np.flip(lattice, axis=(0, 1, 2)))
+    back = mirror.mirrored_back(surface_nets_lattice(flipped))
+    corners = [lattice[i:i + lattice.shape[0] - 1, j:j + lattice.shape[1] - 1,
+                       k:k + lattice.shape[2] - 1] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
+    crossed = np.any(corners, axis=0) & ~np.all(corners, axis=0)
+    assert crossed.sum() > 500
+    np.testing.assert_allclose(back[:-1, :-1, :-1][crossed],
+                               surface_nets_lattice(lattice)[:-1, :-1, :-1][crossed], atol=1e-6)
+    occupied = np.argwhere(lattice)
+    for axis, high in enumerate(mirror.nearer_high(lattice)):
+        lo, hi = occupied[:, axis].min(), occupied[:, axis].max()
+        assert not high[lo] and high[hi - 1]
