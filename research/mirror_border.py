@@ -39,9 +39,38 @@ def nearer_high(lattice: np.ndarray) -> list[np.ndarray]:
             for a, n in enumerate(lattice.shape)]
 
 
+def facing_high(lattice: np.ndarray) -> list[np.ndarray]:
+    """Per axis a, an (X, Y, Z) bool over cells (the last layer of each axis False): more of the
+    cell's corners are inside on its low side along a than on its high side, i.e. the surface
+    through the cell faces the high end of axis a."""
+    inside = lattice.astype(np.int8)
+    # (X-1, Y-1, Z-1) corner counts of each cell's low and high halves along each axis
+    sums = []
+    for axis in range(3):
+        halves = []
+        for side in (0, 1):
+            total = np.zeros(tuple(n - 1 for n in lattice.shape), dtype=np.int8)
+            for i in (0, 1):
+                for j in (0, 1):
+                    index = [None, None, None]
+                    others = [b for b in range(3) if b != axis]
+                    index[axis] = side
+                    index[others[0]], index[others[1]] = i, j
+                    total += inside[tuple(slice(o, o + n - 1)
+                                          for o, n in zip(index, lattice.shape))]
+            halves.append(total)
+        high = np.zeros(lattice.shape, dtype=bool)
+        high[:-1, :-1, :-1] = halves[0] > halves[1]
+        sums.append(high)
+    return sums
+
+
 def main() -> None:
     parser = eval_parser(__doc__)
     parser.add_argument("--average", action="store_true")
+    parser.add_argument("--by-facing", action="store_true", help="take a cell's coordinate along "
+                        "an axis from the mirrored pass where its surface faces that axis's "
+                        "high end, instead of where the cell is nearer the high end")
     args = parser.parse_args()
 
     from agndc_core import pipeline
@@ -57,6 +86,10 @@ def main() -> None:
         if args.average:
             return 0.5 * (vertex + back)
         out = vertex.copy()
+        if args.by_facing:
+            for axis, high in enumerate(facing_high(lattice)):
+                out[..., axis][high] = back[..., axis][high]
+            return out
         for axis, high in enumerate(nearer_high(lattice)):
             shape = [1, 1, 1]
             shape[axis] = -1
