@@ -19,14 +19,16 @@ import numpy as np
 from stage_eval import eval_parser, run_eval
 
 
-def mirrored_back(vertex_f: np.ndarray) -> np.ndarray:
-    """(X, Y, Z, 3) cell offsets predicted on ``np.flip(lattice)`` -> the same cells' offsets in
-    the original lattice. Cell c of the original spans points c and c + 1, which are points
-    N - 1 - c and N - 2 - c of the mirror, i.e. the mirror's cell N - 2 - c; its offset o along
-    an axis is 1 - o. The last layer of cells (no cell) stays as it was, unused."""
-    back = np.flip(vertex_f, axis=(0, 1, 2)).copy()
-    out = back.copy()
-    out[:-1, :-1, :-1] = 1.0 - back[1:, 1:, 1:]
+def mirrored_back(vertex_f: np.ndarray, axes=(0, 1, 2)) -> np.ndarray:
+    """(X, Y, Z, 3) cell offsets predicted on ``np.flip(lattice, axes)`` -> the same cells'
+    offsets in the original lattice. Along a mirrored axis, cell c of the original spans points
+    c and c + 1, which are points N - 1 - c and N - 2 - c of the mirror, i.e. the mirror's cell
+    N - 2 - c; its offset o along that axis is 1 - o. The last layer of cells along a mirrored
+    axis (no cell) holds nothing meaningful and is never used."""
+    out = np.flip(vertex_f, axis=tuple(axes)).copy()
+    for axis in axes:
+        out = np.roll(out, -1, axis=axis)  # index c now holds the mirror's cell N - 2 - c
+        out[..., axis] = 1.0 - out[..., axis]
     return out
 
 
@@ -68,6 +70,9 @@ def facing_high(lattice: np.ndarray) -> list[np.ndarray]:
 def main() -> None:
     parser = eval_parser(__doc__)
     parser.add_argument("--average", action="store_true")
+    parser.add_argument("--thin", type=int, default=0, help="mirror only the axes along which "
+                        "the shape spans at most this many layers of points (no second pass "
+                        "when there is none)")
     parser.add_argument("--by-facing", action="store_true", help="take a cell's coordinate along "
                         "an axis from the mirrored pass where its surface faces that axis's "
                         "high end, instead of where the cell is nearer the high end")
@@ -81,8 +86,15 @@ def main() -> None:
         vertex = predict(method, lattice, *rest, **options)
         if not lattice.any():
             return vertex
-        flipped = np.ascontiguousarray(np.flip(lattice, axis=(0, 1, 2)))
-        back = mirrored_back(predict(method, flipped, *rest, **options))
+        axes = (0, 1, 2)
+        if args.thin:  # only the axes along which the shape spans at most args.thin layers
+            occupied = np.argwhere(lattice)
+            span = occupied.max(0) - occupied.min(0)
+            axes = tuple(int(a) for a in np.flatnonzero(span <= args.thin))
+            if not axes:
+                return vertex
+        flipped = np.ascontiguousarray(np.flip(lattice, axis=axes))
+        back = mirrored_back(predict(method, flipped, *rest, **options), axes)
         if args.average:
             return 0.5 * (vertex + back)
         out = vertex.copy()
@@ -91,6 +103,8 @@ def main() -> None:
                 out[..., axis][high] = back[..., axis][high]
             return out
         for axis, high in enumerate(nearer_high(lattice)):
+            if axis not in axes:
+                continue
             shape = [1, 1, 1]
             shape[axis] = -1
             mask = np.broadcast_to(high.reshape(shape), lattice.shape)

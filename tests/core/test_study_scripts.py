@@ -101,6 +101,12 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
     assert crossed.sum() > 500
     np.testing.assert_allclose(back[:-1, :-1, :-1][crossed],
                                surface_nets_lattice(lattice)[:-1, :-1, :-1][crossed], atol=1e-6)
+    for axes in ((1,), (0, 2)):  # mirrored along some axes only
+        flipped = np.ascontiguousarray(np.flip(lattice, axis=axes))
+        back = mirror.mirrored_back(surface_nets_lattice(flipped), axes)
+        np.testing.assert_allclose(back[:-1, :-1, :-1][crossed],
+                                   surface_nets_lattice(lattice)[:-1, :-1, :-1][crossed],
+                                   atol=1e-6)
     occupied = np.argwhere(lattice)
     for axis, high in enumerate(mirror.nearer_high(lattice)):
         lo, hi = occupied[:, axis].min(), occupied[:, axis].max()
