@@ -71,8 +71,8 @@ def main() -> None:
     parser = eval_parser(__doc__)
     parser.add_argument("--average", action="store_true")
     parser.add_argument("--thin", type=int, default=0, help="mirror only the axes along which "
-                        "the shape spans at most this many layers of points (no second pass "
-                        "when there is none)")
+                        "the shape's occupied points lie at most this many layers apart (no "
+                        "second pass when there is none)")
     parser.add_argument("--by-facing", action="store_true", help="take a cell's coordinate along "
                         "an axis from the mirrored pass where its surface faces that axis's "
                         "high end, instead of where the cell is nearer the high end")
