@@ -10,7 +10,9 @@ the cell is nearer the low end of the shape's occupied box:
 
     .venv/bin/python research/mirror_border.py DATA -o OUT --res 64 [--shifts 3]
 
-``--average`` takes the mean of the two passes instead (the two-flip mirror ensemble).
+``--average`` takes the mean of the two passes instead (the two-flip mirror ensemble),
+``--by-facing`` the mirrored pass's coordinate where the cell's surface faces the high end,
+``--thin N`` mirrors only the axes along which the shape is thin.
 """
 
 from __future__ import annotations
@@ -87,7 +89,7 @@ def main() -> None:
         if not lattice.any():
             return vertex
         axes = (0, 1, 2)
-        if args.thin:  # only the axes along which the shape spans at most args.thin layers
+        if args.thin:  # only the axes along which the occupied points are <= args.thin apart
             occupied = np.argwhere(lattice)
             span = occupied.max(0) - occupied.min(0)
             axes = tuple(int(a) for a in np.flatnonzero(span <= args.thin))
@@ -100,7 +102,8 @@ def main() -> None:
         out = vertex.copy()
         if args.by_facing:
             for axis, high in enumerate(facing_high(lattice)):
-                out[..., axis][high] = back[..., axis][high]
+                if axis in axes:
+                    out[..., axis][high] = back[..., axis][high]
             return out
         for axis, high in enumerate(nearer_high(lattice)):
             if axis not in axes:
