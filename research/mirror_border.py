@@ -34,39 +34,36 @@ def mirrored_back(vertex_f: np.ndarray, axes=(0, 1, 2)) -> np.ndarray:
     return out
 
 
+def occupied_range(lattice: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(3,) int lowest and highest occupied point index along each axis (a non-empty lattice),
+    from ``flatpatches.outer_cell_layers``."""
+    from agndc_core.flatpatches import outer_cell_layers
+
+    outer = [outer_cell_layers(lattice, axis) for axis in range(3)]
+    return (np.array([o[False] + 1 for o in outer]), np.array([o[True] for o in outer]))
+
+
 def nearer_high(lattice: np.ndarray) -> list[np.ndarray]:
     """Per axis a, an (N_a,) bool over cell indices: the cell is nearer the high end of the
     shape's occupied points than the low end."""
-    occupied = np.argwhere(lattice)
-    lo, hi = occupied.min(0), occupied.max(0)
+    lo, hi = occupied_range(lattice)
     return [np.arange(n) + 0.5 - lo[a] > hi[a] - (np.arange(n) + 0.5)
             for a, n in enumerate(lattice.shape)]
 
 
 def facing_high(lattice: np.ndarray) -> list[np.ndarray]:
     """Per axis a, an (X, Y, Z) bool over cells (the last layer of each axis False): more of the
-    cell's corners are inside on its low side along a than on its high side, i.e. the surface
-    through the cell faces the high end of axis a."""
-    inside = lattice.astype(np.int8)
-    # (X-1, Y-1, Z-1) corner counts of each cell's low and high halves along each axis
-    sums = []
+    cell's 4 corners on its low side along a are inside than of the 4 on its high side, i.e. the
+    surface through the cell faces the high end of axis a."""
+    masks = []
     for axis in range(3):
-        halves = []
-        for side in (0, 1):
-            total = np.zeros(tuple(n - 1 for n in lattice.shape), dtype=np.int8)
-            for i in (0, 1):
-                for j in (0, 1):
-                    index = [None, None, None]
-                    others = [b for b in range(3) if b != axis]
-                    index[axis] = side
-                    index[others[0]], index[others[1]] = i, j
-                    total += inside[tuple(slice(o, o + n - 1)
-                                          for o, n in zip(index, lattice.shape))]
-            halves.append(total)
-        high = np.zeros(lattice.shape, dtype=bool)
-        high[:-1, :-1, :-1] = halves[0] > halves[1]
-        sums.append(high)
-    return sums
+        points = np.moveaxis(lattice.astype(np.int8), axis, -1)  # the axis last
+        # inside corners of each 2 x 2 square of points across the axis, per layer
+        square = points[:-1, :-1] + points[1:, :-1] + points[:-1, 1:] + points[1:, 1:]
+        high = np.zeros(points.shape, dtype=bool)
+        high[:-1, :-1, :-1] = square[..., :-1] > square[..., 1:]
+        masks.append(np.moveaxis(high, -1, axis))
+    return masks
 
 
 def main() -> None:
@@ -90,9 +87,8 @@ def main() -> None:
             return vertex
         axes = (0, 1, 2)
         if args.thin:  # only the axes along which the occupied points are <= args.thin apart
-            occupied = np.argwhere(lattice)
-            span = occupied.max(0) - occupied.min(0)
-            axes = tuple(int(a) for a in np.flatnonzero(span <= args.thin))
+            lo, hi = occupied_range(lattice)
+            axes = tuple(int(a) for a in np.flatnonzero(hi - lo <= args.thin))
             if not axes:
                 return vertex
         flipped = np.ascontiguousarray(np.flip(lattice, axis=axes))
