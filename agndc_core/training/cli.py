@@ -21,6 +21,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--sheets", type=float, default=0.0, help="share of the samples that are "
                    "thin sheets instead, 1.5-4 voxels thick at their resolution (default 0; "
                    "the other samples stay as they are without it)")
+    p.add_argument("--tilted", type=float, default=0.0, help="share of the grid-aligned "
+                   "samples (sheets aside) turned 1-15 degrees off the axes instead, like a "
+                   "part modelled or scanned slightly askew (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -113,7 +116,7 @@ def _cmd_data(args) -> int:
         raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds, wrinkled=args.wrinkled,
-                          sheets=args.sheets)
+                          sheets=args.sheets, tilted=args.tilted)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

@@ -19,7 +19,13 @@ import numpy as np
 from ..errors import AGNDCError
 from ..grid import pad_to_lattice
 from ..labels import make_labels
-from ..study.shapes import generate_shape, is_axis_aligned, shape_family, sheet_shape
+from ..study.shapes import (
+    generate_shape,
+    is_axis_aligned,
+    shape_family,
+    sheet_shape,
+    small_turn,
+)
 from ..voxelize import voxelize
 
 RESOLUTION_RANGE = (32, 128)  # voxels on the longest side (random scale, log-uniform)
@@ -35,6 +41,10 @@ WRINKLE_AMPLITUDE = (0.1 / 64, 0.3 / 64)
 #: (``shapes.sheet_shape``; the shape generator's families are never under 5 % of the longest
 #: side thick, 1.6-6.4 voxels at 32-128)
 SHEET_VOXELS = (1.5, 4.0)
+#: slightly tilted parts (``sample_recipe(tilted=...)``): the turn off the grid axes, degrees,
+#: about a random axis. Real parts are often modelled or scanned a few degrees off the axes;
+#: the generator gives only aligned or freely turned shapes
+TILT_DEGREES = (1.0, 15.0)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -53,7 +63,7 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
-                  wrinkled: float = 0.0, sheets: float = 0.0) -> dict:
+                  wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -65,8 +75,10 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     do not depend on it. ``sheets`` is the share of seeds that become a thin sheet instead
     (``shapes.sheet_shape``, ``SHEET_VOXELS`` thick at the recipe's resolution, family
     "sheet", no wrinkles), drawn from a stream of its own: the other seeds' recipes are those
-    of ``sheets=0``. The recipe also records the shape family and whether the sample is
-    grid-aligned.
+    of ``sheets=0``. ``tilted`` is the share of the grid-aligned samples other than sheets that
+    are turned ``TILT_DEGREES`` off the axes instead (another stream of its own; the field
+    ``tilt_degrees`` records the angle). The recipe also records the shape family and whether
+    the sample is grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
@@ -95,6 +107,14 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         recipe.pop("wrinkles", None)
         recipe["family"] = "sheet"
         recipe["sheet_voxels"] = float(sheet_rng.uniform(*SHEET_VOXELS))
+    tilt_rng = np.random.default_rng([seed, 1234, 7])
+    if (tilted > 0 and tilt_rng.random() < tilted and recipe["axis_aligned"]
+            and "sheet_voxels" not in recipe):
+        turn = small_turn(tilt_rng, TILT_DEGREES)
+        recipe["rotation"] = turn.tolist()
+        recipe["axis_aligned"] = False
+        recipe["tilt_degrees"] = float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2,
+                                                                    -1, 1))))
     return recipe
 
 
@@ -167,7 +187,7 @@ def _write_one(args) -> str:
 
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
                   resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
-                  sheets: float = 0.0) -> list[Path]:
+                  sheets: float = 0.0, tilted: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -184,7 +204,7 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
         raise AGNDCError(f"training resolutions must satisfy 8 <= lo <= hi, got {lo}..{hi}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets),
+    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted),
              out_dir / f"sample_{seed:06d}.npz") for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:

@@ -20,6 +20,7 @@ from agndc_core.study.shapes import (
 from agndc_core.training.data import (
     RESOLUTION_RANGE,
     SHEET_VOXELS,
+    TILT_DEGREES,
     WRINKLE_AMPLITUDE,
     WRINKLE_WAVELENGTH,
     WRINKLE_WAVES,
@@ -164,6 +165,39 @@ def test_sheet_recipes_keep_the_other_seeds_and_give_thin_closed_plates():
     v, f = sheet_shape(recipe["seed"], 0.05)
     np.testing.assert_array_equal(v, sheet_shape(recipe["seed"], 0.05)[0])
     assert np.sort(v.max(0) - v.min(0))[0] == pytest.approx(0.05, rel=1e-6)
+
+
+def test_tilted_recipes_turn_only_aligned_shapes_slightly_and_keep_the_other_draws():
+    seeds = range(400)
+    plain = [sample_recipe(s, wrinkled=0.5, sheets=0.2) for s in seeds]
+    tilted = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.6) for s in seeds]
+    turned = [b for b in tilted if "tilt_degrees" in b]
+    candidates = [a for a in plain if a["axis_aligned"] and "sheet_voxels" not in a]
+    assert len(turned) / len(candidates) == pytest.approx(0.6, abs=0.12)
+    for a, b in zip(plain, tilted):
+        if "tilt_degrees" not in b:
+            assert b == a
+            continue
+        assert a["axis_aligned"] and "sheet_voxels" not in a and not b["axis_aligned"]
+        assert {k: v for k, v in b.items() if k not in ("rotation", "axis_aligned",
+                                                         "tilt_degrees")} == {
+            k: v for k, v in a.items() if k not in ("rotation", "axis_aligned")}
+        turn = np.asarray(b["rotation"])
+        np.testing.assert_allclose(turn @ turn.T, np.eye(3), atol=1e-12)
+        assert np.linalg.det(turn) == pytest.approx(1.0)
+        assert TILT_DEGREES[0] - 1e-9 <= b["tilt_degrees"] <= TILT_DEGREES[1] + 1e-9
+    # the mesh is the aligned shape turned: its flat faces leave the axes by the tilt at most,
+    # and its largest face by more than a degree
+    recipe = turned[0]
+    aligned = trimesh.Trimesh(*recipe_mesh({**recipe, "rotation": np.eye(3).tolist()}),
+                              process=False)
+    mesh = trimesh.Trimesh(*recipe_mesh(recipe), process=False)
+    np.testing.assert_allclose(mesh.vertices, aligned.vertices @ np.asarray(
+        recipe["rotation"]).T, atol=1e-12)
+    largest = np.argmax(mesh.area_faces)
+    off_axis = np.degrees(np.arccos(np.abs(mesh.face_normals[largest]).max()))
+    assert 1.0 - 1e-6 < off_axis <= recipe["tilt_degrees"] + 1e-6
+    assert np.abs(aligned.face_normals[largest]).max() > 1 - AXIS_TOL
 
 
 def _on_grid_share(mesh) -> float:
