@@ -111,3 +111,29 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
     for axis, high in enumerate(mirror.nearer_high(lattice)):
         lo, hi = occupied[:, axis].min(), occupied[:, axis].max()
         assert not high[lo] and high[hi - 1]
+
+
+def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
+    """data_mix: shares of family, placement and wrinkles, read back from sample files."""
+    import json
+
+    import numpy as np
+    import pytest
+
+    from agndc_core.training.data import sample_recipe
+
+    mix = research_script("data_mix")
+    made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0) for s in range(120)]
+    for recipe in made:  # only the recipe: what the script reads
+        np.savez(tmp_path / f"sample_{recipe['seed']:06d}.npz", recipe=json.dumps(recipe))
+    (tmp_path / "other.npz").touch()  # not a sample
+    read = mix.recipes(tmp_path)
+    assert read == made
+    shares = mix.kinds(read)
+    sheets = sum(r["family"] == "sheet" for r in made)
+    assert shares["sheet"] == pytest.approx(sheets / 120) and 0 < sheets < 60
+    assert shares["tilted"] == pytest.approx(sum("tilt_degrees" in r for r in made) / 120)
+    assert shares["tilted"] > 0.15 and shares["wrinkled"] > 0.15
+    assert sum(shares[p] for p in ("aligned", "tilted", "turned")) == pytest.approx(1.0)
+    families = [f for f in shares if f not in ("aligned", "tilted", "turned", "wrinkled")]
+    assert sum(shares[f] for f in families) == pytest.approx(1.0)
