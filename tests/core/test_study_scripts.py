@@ -137,3 +137,42 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     assert sum(shares[p] for p in ("aligned", "tilted", "turned")) == pytest.approx(1.0)
     families = [f for f in shares if f not in ("aligned", "tilted", "turned", "wrinkled")]
     assert sum(shares[f] for f in families) == pytest.approx(1.0)
+
+
+def test_compared_rows_keep_the_shared_grids_and_count_lower_cds(tmp_path):
+    """compare_rows: the reference's method renamed, candidates on the placements all scored,
+    the count of grids with a lower CD; read back from rows.csv with empty metrics as nan."""
+    import csv
+    import math
+
+    compare_rows = research_script("compare_rows")
+    columns = ["mesh", "name", "category", "method", "resolution", "shift", "cd", "f1", "nc",
+               "ecd", "ef1", "faces", "seconds", "metric_seconds", "error"]
+
+    def row(name, method, cd, shift="0", error=""):
+        return {"mesh": f"{name}.obj", "name": name, "category": "CAD", "method": method,
+                "resolution": "64", "shift": shift, "cd": str(cd), "f1": "0.5", "nc": "0.9",
+                "ecd": "", "ef1": "", "faces": "10", "seconds": "1", "metric_seconds": "1",
+                "error": error}
+
+    reference = [row(n, m, cd) for n in ("a", "b", "c")
+                 for m, cd in (("mc", 3.0), ("oracle_binary", 1.0), ("agndc", 2.0))]
+    reference.append(row("d", "agndc", 2.0, error="failed"))  # an error row is dropped
+    candidate = [row("a", "agndc", 1.5), row("b", "agndc", 2.5), row("b", "agndc", 1.0, "1"),
+                 row("d", "agndc", 1.0)]
+    paths = []
+    for name, rows in (("ref", reference), ("new", candidate)):
+        path = tmp_path / name / "rows.csv"
+        path.parent.mkdir()
+        with open(path, "w", newline="") as handle:
+            writer = csv.DictWriter(handle, columns)
+            writer.writeheader()
+            writer.writerows(rows)
+        paths.append(path)
+    ref_rows = compare_rows.read_rows(paths[0])
+    assert len(ref_rows) == 9 and math.isnan(ref_rows[0]["ecd"]) and ref_rows[0]["cd"] == 3.0
+    rows, better = compare_rows.compare(ref_rows, {"new": compare_rows.read_rows(paths[1])})
+    # only grids a and b (shift 0) were scored by both
+    assert better == {"new": (1, 2)}
+    assert sorted((r["method"], r["name"]) for r in rows) == sorted(
+        [(m, n) for n in ("a", "b") for m in ("mc", "oracle_binary", "reference", "new")])

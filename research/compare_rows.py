@@ -1,0 +1,84 @@
+"""A network's `agndc eval` rows against a reference's: the table a checkpoint is chosen by.
+
+    .venv/bin/python research/compare_rows.py REF/rows.csv CAND/rows.csv [CAND2/rows.csv ...] \
+        [--method agndc]
+
+The reference rows hold marching cubes, ``oracle_binary`` and METHOD (the shipped network);
+each candidate file holds METHOD too (another checkpoint, another stage), scored on the same
+meshes, resolution and grid placements. Printed: the metric means over the placements every
+file has, each row's share of the MC→``oracle_binary`` CD/EF1 headroom per class, and on how
+many placements the candidate's CD is below the reference's (the noise between two frames of
+one shape is often larger than a difference of means).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+from agndc_core.study.evaluate import (
+    METRIC_COLUMNS,
+    headroom_table,
+    markdown_table,
+    summarize_rows,
+)
+
+
+def read_rows(path) -> list[dict]:
+    """The rows of an `agndc eval` rows.csv without an error, metrics as floats (nan if empty)."""
+    with open(path, newline="") as handle:
+        rows = [r for r in csv.DictReader(handle) if not r["error"]]
+    for row in rows:
+        for column in METRIC_COLUMNS + ("seconds",):
+            row[column] = float(row[column]) if row[column] else float("nan")
+    return rows
+
+
+def placement(row: dict) -> tuple[str, str, str]:
+    return row["name"], row["resolution"], row["shift"]
+
+
+def compare(reference: list[dict], candidates: dict[str, list[dict]], method: str = "agndc"):
+    """(rows, better): the reference's rows (its METHOD as "reference") and each candidate's
+    METHOD rows under the candidate's label, on the placements all of them scored; and per
+    label the number of placements with a CD below the reference's, of how many."""
+    pick = {label: {placement(r): r for r in rows if r["method"] == method}
+            for label, rows in candidates.items()}
+    ours = {placement(r): r for r in reference if r["method"] == method}
+    shared = set(ours).intersection(*pick.values())
+    rows = []
+    for row in reference:
+        if placement(row) in shared:
+            rows.append({**row, "method": "reference" if row["method"] == method
+                         else row["method"]})
+    better = {}
+    for label, chosen in pick.items():
+        rows += [{**chosen[p], "method": label} for p in sorted(shared)]
+        better[label] = (sum(chosen[p]["cd"] < ours[p]["cd"] for p in shared), len(shared))
+    return rows, better
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("reference")
+    parser.add_argument("candidates", nargs="+")
+    parser.add_argument("--method", default="agndc")
+    args = parser.parse_args()
+    candidates = {}
+    for path in args.candidates:  # labelled by the folder the rows are in
+        label = Path(path).parent.name or path
+        while label in candidates:
+            label += "'"
+        candidates[label] = read_rows(path)
+    rows, better = compare(read_rows(args.reference), candidates, args.method)
+    print(markdown_table(summarize_rows(rows)))
+    print()
+    print(headroom_table(rows))
+    print()
+    for label, (count, total) in better.items():
+        print(f"{label}: CD below the reference's on {count} of {total} grids")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Score an AGNDC checkpoint on the generated validation family and the thin sheets, on the frames
+# a shipping decision needs (docs/training.md, "Evaluating"), and compare it with the shipped
+# weights scored the same way:
+#   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
+# VAL holds family/ and sheets/ (made by `bash research/score_validation.sh VAL data`: agndc
+# val-data, 48 shapes and 24 sheets, ~1 min). NAME without a CHECKPOINT scores the shipped
+# weights, together with marching cubes and oracle_binary (the reference; run it first, as
+# NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 / 128 the family centred, 64s /
+# 128s on 3 shifted grids per shape, sheets / sheets_s the sheets at 64^3. A finished frame is
+# skipped. Results: OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
+# Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+val=$1
+agndc=.venv/bin/agndc
+if [[ ${2:-} == data ]]; then  # the validation data, once
+    [[ -f $val/family/MANIFEST.csv ]] || $agndc val-data -o "$val/family" -n 48
+    [[ -f $val/sheets/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets" -n 24
+    exit 0
+fi
+out=$2 name=$3
+checkpoint=${4:-}
+frames=${5:-64 64s sheets sheets_s}
+if [[ -n $checkpoint ]]; then
+    methods=(--methods agndc --checkpoint "agndc=$checkpoint")
+else
+    methods=(--methods mc,oracle_binary,agndc)
+fi
+for frame in $frames; do
+    case $frame in
+        64) args=("$val/family" --res 64) ;;
+        64s) args=("$val/family" --res 64 --shifts 3) ;;
+        128) args=("$val/family" --res 128) ;;
+        128s) args=("$val/family" --res 128 --shifts 3) ;;
+        sheets) args=("$val/sheets" --res 64) ;;
+        sheets_s) args=("$val/sheets" --res 64 --shifts 3) ;;
+        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s)" >&2; exit 2 ;;
+    esac
+    dest=$out/$name/$frame
+    if [[ ! -f $dest/rows.csv ]]; then
+        $agndc eval "${args[@]}" "${methods[@]}" --samples 30000 -o "$dest" > "$dest.log" 2>&1 \
+            || { mkdir -p "$dest"; cat "$dest.log" >&2; exit 1; }
+    fi
+    if [[ -n $checkpoint && -f $out/shipped/$frame/rows.csv ]]; then
+        echo "## $frame"
+        .venv/bin/python research/compare_rows.py "$out/shipped/$frame/rows.csv" "$dest/rows.csv"
+    fi
+done
