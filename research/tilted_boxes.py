@@ -13,6 +13,8 @@ creases and their bevels) are left out. Per box face and then averaged over the 
 
     .venv/bin/python research/tilted_boxes.py --angles 1 2.5 5 10 --res 64 \\
         --methods mc surfacenets undc agndc agndc_fast oracle_binary
+    .venv/bin/python research/tilted_boxes.py --methods agndc new=agndc \\
+        --checkpoint new=runs/RUN/step-000800.safetensors
     .venv/bin/python research/tilted_boxes.py --figure docs/images/tilted_box_1deg.png
 
 ``--figure`` draws the box tilted 1° at 128³ by AGNDC without and with the terraced planes'
@@ -135,24 +137,32 @@ def main() -> None:
     parser.add_argument("--margin", type=float, default=3.0,
                         help="voxels kept clear of the box's other faces (its creases)")
     parser.add_argument("--threads", type=int, default=0)
+    parser.add_argument("--checkpoint", action="append", default=[], metavar="LABEL=PATH",
+                        help="weights of a LABEL=METHOD entry of --methods (as agndc eval)")
     parser.add_argument("--figure", help="draw the picture of the 1° box to this PNG instead")
     args = parser.parse_args()
     if args.figure:
         draw_projections(args.figure)
         return
+    from agndc_core.study.evaluate import method_checkpoint, method_parts, parse_methods
+
+    methods = parse_methods(",".join(args.methods))
+    checkpoints = dict(item.split("=", 1) for item in args.checkpoint)
     print(f"load average {os.getloadavg()[0]:.2f}")
     print("res  angle  method          normal°  worst°  RMS plane  worst  RMS own   s")
     for res in args.res:
         for angle in args.angles:
             vertices, faces, turn = box_mesh(angle)
-            for method in args.methods:
+            for entry in methods:
+                label, method, _ = method_parts(entry)
                 start = time.perf_counter()
-                result = pipeline.remesh_mesh(vertices, faces, resolution=res, method=method,
-                                              threads=args.threads)
+                result = pipeline.remesh_mesh(
+                    vertices, faces, resolution=res, method=method, threads=args.threads,
+                    checkpoint=method_checkpoint(checkpoints, label, method))
                 seconds = time.perf_counter() - start
                 voxel = float(np.abs(result.grid.voxel_size).max())
                 m = face_flatness(result.vertices, result.faces, turn, voxel, args.margin)
-                print(f"{res:3d}  {angle:5.1f}  {method:14s} {m['normal_deg']:7.2f} "
+                print(f"{res:3d}  {angle:5.1f}  {label:14s} {m['normal_deg']:7.2f} "
                       f"{m['worst_normal_deg']:7.2f}  {m['rms_plane_vx']:9.3f} "
                       f"{m['worst_rms_vx']:6.3f}  {m['rms_own_vx']:7.3f} {seconds:5.1f}",
                       flush=True)
