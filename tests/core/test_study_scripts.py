@@ -176,3 +176,37 @@ def test_compared_rows_keep_the_shared_grids_and_count_lower_cds(tmp_path):
     assert better == {"new": (1, 2)}
     assert sorted((r["method"], r["name"]) for r in rows) == sorted(
         [(m, n) for n in ("a", "b") for m in ("mc", "oracle_binary", "reference", "new")])
+
+
+def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
+    """thin_routing: a plate k voxels thick has points ceil(k / 2) deep, so its surface cells
+    are thin from that depth on; a thick cube's are not; empty space never is."""
+    import numpy as np
+    from scipy import ndimage
+
+    from agndc_core.grid import pad_to_lattice
+
+    routing = research_script("thin_routing")
+
+    def surface(lattice):
+        corners = [lattice[i:i + lattice.shape[0] - 1, j:j + lattice.shape[1] - 1,
+                           k:k + lattice.shape[2] - 1] for i in (0, 1) for j in (0, 1)
+                   for k in (0, 1)]
+        cells = np.zeros(lattice.shape, dtype=bool)
+        cells[:-1, :-1, :-1] = np.any(corners, axis=0) & ~np.all(corners, axis=0)
+        return cells
+
+    for thickness, thin_from in ((2, 1), (4, 2), (6, 3)):
+        grid = np.zeros((30, 30, 30), dtype=bool)
+        grid[5:25, 5:25, 5:5 + thickness] = True
+        lattice = pad_to_lattice(grid)
+        cells = surface(lattice)
+        for depth in (1, 2, 3):
+            thin = routing.thin_cells(lattice, depth, radius=3)
+            # never a cell of empty space away from the shape
+            assert not thin[ndimage.distance_transform_edt(~lattice) > 3 + 2].any()
+            assert (thin & cells).sum() == (cells.sum() if depth >= thin_from else 0)
+    grid = np.zeros((30, 30, 30), dtype=bool)
+    grid[5:17, 5:17, 5:17] = True
+    assert not routing.thin_cells(pad_to_lattice(grid), 3, radius=3)[surface(
+        pad_to_lattice(grid))].any()
