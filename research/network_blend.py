@@ -14,7 +14,7 @@ offsets can be averaged before the flat-patch stage, the contouring and the norm
 
 from __future__ import annotations
 
-from stage_eval import eval_parser, run_eval
+from stage_eval import eval_parser, run_eval_with_network
 
 
 def main() -> None:
@@ -24,19 +24,8 @@ def main() -> None:
     parser.add_argument("--weight", type=float, default=0.5, help="AGNDC's share, 0..1")
     args = parser.parse_args()
 
-    from agndc_core import pipeline
-
-    predict = pipeline._predict
-
-    def blended(method, lattice, *rest, **options):
-        vertex = predict(method, lattice, *rest, **options)
-        if method != "agndc":
-            return vertex
-        other = predict(args.other, lattice, *rest, **options)
-        return args.weight * vertex + (1.0 - args.weight) * other
-
-    pipeline._predict = blended
-    run_eval(args)
+    run_eval_with_network(args, args.other, lambda lattice, vertex, other: (
+        args.weight * vertex + (1.0 - args.weight) * other()))
 
 
 if __name__ == "__main__":

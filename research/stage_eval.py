@@ -1,6 +1,7 @@
 """The arguments and the run shared by the studies that score ``agndc eval`` with one stage of
 the pipeline replaced (``flat_patch_depth.py``, ``mirror_border.py``, ``filter_passes.py``,
-``filter_detail.py``): each replaces its stage, then calls ``run_eval``."""
+``filter_detail.py``, ``network_blend.py``, ``thin_routing.py``): each replaces its stage, then
+calls ``run_eval`` (``run_eval_with_network`` for a second network)."""
 
 from __future__ import annotations
 
@@ -29,3 +30,21 @@ def run_eval(args: argparse.Namespace) -> None:
     agndc(["eval", args.data, "--methods", getattr(args, "methods", "agndc"), "--res",
            str(args.res), "--samples", str(args.samples), "--shifts", str(args.shifts),
            "-o", args.out])
+
+
+def run_eval_with_network(args: argparse.Namespace, other: str, combine) -> None:
+    """``run_eval`` with AGNDC's vertices replaced by ``combine(lattice, vertex, other_vertex)``:
+    ``vertex`` AGNDC's (X, Y, Z, 3) cell offsets, ``other_vertex()`` those of the shipped network
+    ``other`` on the same lattice (predicted only when called)."""
+    from agndc_core import pipeline
+
+    predict = pipeline._predict
+
+    def combined(method, lattice, *rest, **options):
+        vertex = predict(method, lattice, *rest, **options)
+        if method != "agndc":
+            return vertex
+        return combine(lattice, vertex, lambda: predict(other, lattice, *rest, **options))
+
+    pipeline._predict = combined
+    run_eval(args)

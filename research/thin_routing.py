@@ -16,7 +16,7 @@ points a few voxels in.
 from __future__ import annotations
 
 import numpy as np
-from stage_eval import eval_parser, run_eval
+from stage_eval import eval_parser, run_eval_with_network
 
 
 def thin_cells(lattice: np.ndarray, depth: float, radius: int) -> np.ndarray:
@@ -43,24 +43,15 @@ def main() -> None:
                         "for a deeper point")
     args = parser.parse_args()
 
-    from agndc_core import pipeline
-
-    predict = pipeline._predict
-
-    def routed(method, lattice, *rest, **options):
-        vertex = predict(method, lattice, *rest, **options)
-        if method != "agndc":
-            return vertex
+    def routed(lattice, vertex, fast):
         thin = thin_cells(lattice, args.depth, args.radius)
         if not thin.any():
             return vertex
-        fast = predict("agndc_fast", lattice, *rest, **options)
         vertex = vertex.copy()
-        vertex[thin] = fast[thin]
+        vertex[thin] = fast()[thin]
         return vertex
 
-    pipeline._predict = routed
-    run_eval(args)
+    run_eval_with_network(args, "agndc_fast", routed)
 
 
 if __name__ == "__main__":
