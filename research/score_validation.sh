@@ -39,8 +39,9 @@ for frame in $frames; do
     esac
     dest=$out/$name/$frame
     if [[ ! -f $dest/rows.csv ]]; then
+        mkdir -p "$out/$name"
         $agndc eval "${args[@]}" "${methods[@]}" --samples 30000 -o "$dest" > "$dest.log" 2>&1 \
-            || { mkdir -p "$dest"; cat "$dest.log" >&2; exit 1; }
+            || { cat "$dest.log" >&2; exit 1; }
     fi
     if [[ -n $checkpoint && -f $out/shipped/$frame/rows.csv ]]; then
         echo "## $frame"
