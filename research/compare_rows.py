@@ -53,8 +53,8 @@ def compare(reference: list[dict], candidates: dict[str, list[dict]], method: st
             rows.append({**row, "method": "reference" if row["method"] == method
                          else row["method"]})
     better = {}
-    for label, chosen in pick.items():
-        rows += [{**chosen[p], "method": label} for p in sorted(shared)]
+    for label, chosen in pick.items():  # the reference's mesh path: one shape, one count
+        rows += [{**chosen[p], "method": label, "mesh": ours[p]["mesh"]} for p in sorted(shared)]
         better[label] = (sum(chosen[p]["cd"] < ours[p]["cd"] for p in shared), len(shared))
     return rows, better
 
@@ -64,10 +64,13 @@ def main() -> None:
     parser.add_argument("reference")
     parser.add_argument("candidates", nargs="+")
     parser.add_argument("--method", default="agndc")
+    parser.add_argument("--labels", help="comma-separated names of the candidates (default: the "
+                        "folders their rows are in)")
     args = parser.parse_args()
+    labels = args.labels.split(",") if args.labels else [
+        Path(path).parent.name or path for path in args.candidates]
     candidates = {}
-    for path in args.candidates:  # labelled by the folder the rows are in
-        label = Path(path).parent.name or path
+    for label, path in zip(labels, args.candidates, strict=True):
         while label in candidates:
             label += "'"
         candidates[label] = read_rows(path)

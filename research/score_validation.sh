@@ -45,6 +45,7 @@ for frame in $frames; do
     fi
     if [[ -n $checkpoint && -f $out/shipped/$frame/rows.csv ]]; then
         echo "## $frame"
-        .venv/bin/python research/compare_rows.py "$out/shipped/$frame/rows.csv" "$dest/rows.csv"
+        .venv/bin/python research/compare_rows.py "$out/shipped/$frame/rows.csv" "$dest/rows.csv" \
+            --labels "$name"
     fi
 done

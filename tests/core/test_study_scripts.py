@@ -176,6 +176,7 @@ def test_compared_rows_keep_the_shared_grids_and_count_lower_cds(tmp_path):
     assert better == {"new": (1, 2)}
     assert sorted((r["method"], r["name"]) for r in rows) == sorted(
         [(m, n) for n in ("a", "b") for m in ("mc", "oracle_binary", "reference", "new")])
+    assert {r["mesh"] for r in rows} == {"a.obj", "b.obj"}  # one shape counted once
 
 
 def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
