@@ -9,8 +9,8 @@
 # steps on DATA, the thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned
 # ones are turned 1-15 degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at
 # stage 5's learning rate 1e-4 and EMA 0.99, a checkpoint at 400 and 800 to score on the
-# validation family. A stage is kept short enough to finish in one sitting (on a slow core a
-# step takes ~6 s), since only its run folder carries its state.
+# validation family. A stage is kept short (about 80 min where a step takes ~6 s), since only
+# its run folder carries its state: a new machine starts the stage again.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
