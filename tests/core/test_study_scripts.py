@@ -87,7 +87,7 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
     import numpy as np
     from scipy import ndimage
 
-    from agndc_core.grid import pad_to_lattice
+    from agndc_core.grid import crossed_edges, pad_to_lattice, surface_cells
     from agndc_core.surfacenets import surface_nets_lattice
 
     mirror = research_script("mirror_border")
@@ -95,17 +95,13 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
     lattice = pad_to_lattice(field > 0.5)
     flipped = np.ascontiguousarray(np.flip(lattice, axis=(0, 1, 2)))
     back = mirror.mirrored_back(surface_nets_lattice(flipped))
-    corners = [lattice[i:i + lattice.shape[0] - 1, j:j + lattice.shape[1] - 1,
-                       k:k + lattice.shape[2] - 1] for i in (0, 1) for j in (0, 1) for k in (0, 1)]
-    crossed = np.any(corners, axis=0) & ~np.all(corners, axis=0)
+    crossed = surface_cells(crossed_edges(lattice))
     assert crossed.sum() > 500
-    np.testing.assert_allclose(back[:-1, :-1, :-1][crossed],
-                               surface_nets_lattice(lattice)[:-1, :-1, :-1][crossed], atol=1e-6)
+    np.testing.assert_allclose(back[crossed], surface_nets_lattice(lattice)[crossed], atol=1e-6)
     for axes in ((1,), (0, 2)):  # mirrored along some axes only
         flipped = np.ascontiguousarray(np.flip(lattice, axis=axes))
         back = mirror.mirrored_back(surface_nets_lattice(flipped), axes)
-        np.testing.assert_allclose(back[:-1, :-1, :-1][crossed],
-                                   surface_nets_lattice(lattice)[:-1, :-1, :-1][crossed],
+        np.testing.assert_allclose(back[crossed], surface_nets_lattice(lattice)[crossed],
                                    atol=1e-6)
     occupied = np.argwhere(lattice)
     for axis, high in enumerate(mirror.nearer_high(lattice)):
@@ -185,17 +181,12 @@ def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
     import numpy as np
     from scipy import ndimage
 
-    from agndc_core.grid import pad_to_lattice
+    from agndc_core.grid import crossed_edges, pad_to_lattice, surface_cells
 
     routing = research_script("thin_routing")
 
     def surface(lattice):
-        corners = [lattice[i:i + lattice.shape[0] - 1, j:j + lattice.shape[1] - 1,
-                           k:k + lattice.shape[2] - 1] for i in (0, 1) for j in (0, 1)
-                   for k in (0, 1)]
-        cells = np.zeros(lattice.shape, dtype=bool)
-        cells[:-1, :-1, :-1] = np.any(corners, axis=0) & ~np.all(corners, axis=0)
-        return cells
+        return surface_cells(crossed_edges(lattice))
 
     for thickness, thin_from in ((2, 1), (4, 2), (6, 3)):
         grid = np.zeros((30, 30, 30), dtype=bool)
