@@ -15,7 +15,7 @@ thin-parts-routing.md). This scores that framing:
 from __future__ import annotations
 
 import numpy as np
-from stage_eval import eval_parser, run_eval
+from stage_eval import eval_parser, run_eval_with_prediction
 
 
 def main() -> None:
@@ -24,21 +24,17 @@ def main() -> None:
                         "lattice's high end on every axis (a multiple of 4)")
     args = parser.parse_args()
 
-    from agndc_core import pipeline
+    from agndc_core.methods import CHECKPOINT_NAMES
 
-    predict = pipeline._predict
-
-    def padded(method, lattice, *rest, **options):
-        if method not in ("agndc", "agndc_fast", "undc") or not args.extra:
-            return predict(method, lattice, *rest, **options)
+    def padded(method, lattice, predict):
+        if method not in CHECKPOINT_NAMES or not args.extra:  # the learned methods only
+            return predict(method, lattice)
         wide = np.pad(lattice, [(0, args.extra)] * 3)
-        vertex = predict(method, wide, *rest, **options)
+        vertex = predict(method, wide)
         return np.ascontiguousarray(vertex[:lattice.shape[0], :lattice.shape[1],
                                            :lattice.shape[2]])
 
-    pipeline._predict = padded
-    run_eval(args)
-
+    run_eval_with_prediction(args, padded)
 
 if __name__ == "__main__":
     main()

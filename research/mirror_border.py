@@ -18,7 +18,7 @@ the cell is nearer the low end of the shape's occupied box:
 from __future__ import annotations
 
 import numpy as np
-from stage_eval import eval_parser, run_eval
+from stage_eval import eval_parser, run_eval_with_prediction
 
 
 def mirrored_back(vertex_f: np.ndarray, axes=(0, 1, 2)) -> np.ndarray:
@@ -77,12 +77,8 @@ def main() -> None:
                         "high end, instead of where the cell is nearer the high end")
     args = parser.parse_args()
 
-    from agndc_core import pipeline
-
-    predict = pipeline._predict
-
-    def both(method, lattice, *rest, **options):
-        vertex = predict(method, lattice, *rest, **options)
+    def both(method, lattice, predict):
+        vertex = predict(method, lattice)
         if not lattice.any():
             return vertex
         axes = (0, 1, 2)
@@ -92,7 +88,7 @@ def main() -> None:
             if not axes:
                 return vertex
         flipped = np.ascontiguousarray(np.flip(lattice, axis=axes))
-        back = mirrored_back(predict(method, flipped, *rest, **options), axes)
+        back = mirrored_back(predict(method, flipped), axes)
         if args.average:
             return 0.5 * (vertex + back)
         out = vertex.copy()
@@ -110,8 +106,7 @@ def main() -> None:
             out[..., axis][mask] = back[..., axis][mask]
         return out
 
-    pipeline._predict = both
-    run_eval(args)
+    run_eval_with_prediction(args, both)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,8 @@
 """The arguments and the run shared by the studies that score ``agndc eval`` with one stage of
 the pipeline replaced (``flat_patch_depth.py``, ``mirror_border.py``, ``filter_passes.py``,
-``filter_detail.py``, ``network_blend.py``, ``thin_routing.py``): each replaces its stage, then
-calls ``run_eval`` (``run_eval_with_network`` for a second network)."""
+``filter_detail.py``, ``network_blend.py``, ``thin_routing.py``, ``high_margin.py``): each
+replaces its stage, then calls ``run_eval`` (``run_eval_with_prediction`` when the stage is the
+network's prediction, ``run_eval_with_network`` for a second network beside AGNDC)."""
 
 from __future__ import annotations
 
@@ -32,19 +33,32 @@ def run_eval(args: argparse.Namespace) -> None:
            "-o", args.out])
 
 
+def run_eval_with_prediction(args: argparse.Namespace, replace) -> None:
+    """``run_eval`` with the pipeline's vertex prediction replaced: ``replace(method, lattice,
+    predict)`` returns the (X, Y, Z, 3) cell offsets of ``method`` on ``lattice``, and
+    ``predict(method, lattice)`` is the pipeline's own prediction, with the call's other
+    arguments (checkpoint, threads, framing)."""
+    from agndc_core import pipeline
+
+    original = pipeline._predict
+
+    def replaced(method, lattice, *rest, **options):
+        return replace(method, lattice,
+                       lambda which, points: original(which, points, *rest, **options))
+
+    pipeline._predict = replaced
+    run_eval(args)
+
+
 def run_eval_with_network(args: argparse.Namespace, other: str, combine) -> None:
     """``run_eval`` with AGNDC's vertices replaced by ``combine(lattice, vertex, other_vertex)``:
     ``vertex`` AGNDC's (X, Y, Z, 3) cell offsets, ``other_vertex()`` those of the shipped network
     ``other`` on the same lattice (predicted only when called)."""
-    from agndc_core import pipeline
 
-    predict = pipeline._predict
-
-    def combined(method, lattice, *rest, **options):
-        vertex = predict(method, lattice, *rest, **options)
+    def replace(method, lattice, predict):
+        vertex = predict(method, lattice)
         if method != "agndc":
             return vertex
-        return combine(lattice, vertex, lambda: predict(other, lattice, *rest, **options))
+        return combine(lattice, vertex, lambda: predict(other, lattice))
 
-    pipeline._predict = combined
-    run_eval(args)
+    run_eval_with_prediction(args, replace)
