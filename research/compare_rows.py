@@ -14,25 +14,15 @@ one shape is often larger than a difference of means).
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
-from agndc_core.study.evaluate import (
-    METRIC_COLUMNS,
-    headroom_table,
-    markdown_table,
-    summarize_rows,
-)
+from agndc_core.study import evaluate
+from agndc_core.study.evaluate import headroom_table, markdown_table, summarize_rows
 
 
 def read_rows(path) -> list[dict]:
     """The rows of an `agndc eval` rows.csv without an error, metrics as floats (nan if empty)."""
-    with open(path, newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if not r["error"]]
-    for row in rows:
-        for column in METRIC_COLUMNS + ("seconds",):
-            row[column] = float(row[column]) if row[column] else float("nan")
-    return rows
+    return [row for row in evaluate.read_rows(path) if not row["error"]]
 
 
 def placement(row: dict) -> tuple[str, str, str]:

@@ -14,16 +14,15 @@ a continued run's points lie on the same axis as the run it continues.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 import re
 from pathlib import Path
 
 from agndc_core.metrics import REPORT_SCALE
+from agndc_core.study import evaluate
 from agndc_core.study.evaluate import (
     HEADROOM_COLUMNS,
-    METRIC_COLUMNS,
     headroom_shares,
     markdown_table,
     summarize_rows,
@@ -35,12 +34,7 @@ SHIPPED_METHODS = ("undc", "agndc")
 
 
 def read_rows(path: Path, resolution: str = "64") -> list[dict]:
-    with open(path, newline="") as handle:
-        rows = [r for r in csv.DictReader(handle) if r["resolution"] == resolution]
-    for row in rows:
-        for column in METRIC_COLUMNS + ("seconds",):
-            row[column] = float(row[column]) if row[column] not in ("", None) else float("nan")
-    return rows
+    return [row for row in evaluate.read_rows(path) if row["resolution"] == resolution]
 
 
 def steps_before(runs: Path, run: str) -> int:

@@ -316,6 +316,17 @@ def headroom_table(rows, ceiling: str = "oracle_binary", columns=HEADROOM_COLUMN
     return "\n".join(lines)
 
 
+def read_rows(path) -> list[dict]:
+    """The rows of a ``rows.csv`` that ``write_report`` wrote, the metrics and seconds as floats
+    (nan where empty), the other columns as text."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    for row in rows:
+        for column in METRIC_COLUMNS + ("seconds",):
+            row[column] = float(row[column]) if row[column] not in ("", None) else math.nan
+    return rows
+
+
 def write_report(rows, out_dir: Path) -> dict[str, Path]:
     """Write rows.csv plus one markdown table per method (per category and overall)."""
     out_dir = Path(out_dir)

@@ -20,8 +20,10 @@ from agndc_core.study.evaluate import (
     headroom_table,
     method_parts,
     parse_methods,
+    read_rows,
     shift_table,
     summarize_rows,
+    write_report,
 )
 from agndc_core.study.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
 
@@ -90,6 +92,21 @@ def test_headroom_table_per_category():
     assert table[5] == "| a | 50.0 % / 50.0 % | 50.0 % / 50.0 % | 50.0 % / 50.0 % |"
     assert table[4].startswith("| mc | 0.0 % / 0.0 %")
     assert headroom_table([r for r in rows if r["method"] != "oracle_binary"]) == ""
+
+
+def test_written_rows_read_back_with_float_metrics(tmp_path):
+    row = {"mesh": "p.obj", "name": "p", "category": "CAD", "method": "mc", "resolution": 64,
+           "shift": None, "cd": 2.5e-5, "f1": 0.5, "nc": 0.9, "ecd": math.nan, "ef1": math.nan,
+           "seconds": 0.1, "error": ""}
+    path = write_report([row], tmp_path)["csv"]
+    with open(path, "a", newline="") as handle:  # a row without metrics: empty cells
+        csv.writer(handle).writerow(["q.obj", "q", "CAD", "mc", 64, "", "", "", "", "", "", "",
+                                     "failed"])
+    back = read_rows(path)
+    assert back[0]["cd"] == 2.5e-5 and back[0]["seconds"] == 0.1
+    assert math.isnan(back[0]["ecd"]) and math.isnan(back[1]["cd"])
+    assert math.isnan(back[1]["seconds"])
+    assert (back[0]["name"], back[0]["resolution"], back[1]["error"]) == ("p", "64", "failed")
 
 
 def test_rotated_box_is_a_closed_turned_box():
