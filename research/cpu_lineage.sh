@@ -9,8 +9,10 @@
 # steps on DATA, the thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned
 # ones are turned 1-15 degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at
 # stage 5's learning rate 1e-4 and EMA 0.99, a checkpoint at 400 and 800 to score on the
-# validation family. A stage is kept short (about 80 min where a step takes ~6 s), since only
-# its run folder carries its state: a new machine starts the stage again.
+# validation family. Stage 9: stage 8's final weights continued 800 steps on the same data at
+# half its learning rate and a slower EMA (0.995). A stage is kept short (about 80 min where a
+# step takes ~6 s), since only its run folder carries its state: a new machine starts the stage
+# again.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -68,6 +70,9 @@ current)
     stage tilt_agndc16 --data "$data,$sheets,$wrinkled,$tilted" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 1e-4 --ema 0.99 --seed 15 --steps 800,0,0 --val-steps 400,800
+    stage tilt_agndc16_cont --data "$data,$sheets,$wrinkled,$tilted" \
+        --init "$runs/tilt_agndc16/final.safetensors" --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 16 --steps 800,0,0 --val-steps 400,800
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
