@@ -66,7 +66,7 @@ SCALE_COST_RATIO = 0.5
 
 def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = None,
                     progress=None, cancel=None, device=None, band_radius: int | None = None,
-                    canonical: bool = True, edges: bool = True):
+                    canonical: bool = True, edges: bool = True, high_margin: int = 0):
     """Run the AGNDC cascade on a padded dual-contouring lattice (grid.py convention).
 
     Args:
@@ -87,6 +87,10 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
         edges: also return the finest edge probabilities; False (what contouring a binary grid
             needs: its edges come from the grid) returns None for them and, in the numpy
             runtime, keeps only the vertex channels of the finest scale (half its memory).
+        high_margin: empty points added after the high end of each axis whose last layer is
+            empty, the prediction cropped back (``methods.Method.high_margin``: where the
+            network learned to put a face next to the high border); 0 runs the network on the
+            lattice's own extent.
 
     Returns:
         vertex: (Dx, Dy, Dz, 3) float32 in [0, 1], the dual vertex of the cell at each point as
@@ -100,7 +104,7 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
     if window is not None:
         return _predict_window(model, lattice, window, mode=mode, tile=tile, progress=progress,
                                cancel=cancel, device=device, band_radius=band_radius,
-                               edges=edges)
+                               edges=edges, high_margin=high_margin)
     numpy_net = getattr(model, "backend", None) == "numpy"
     if numpy_net and (mode == "dense" or device not in (None, "cpu")):
         raise AGNDCError("the numpy runtime evaluates the band on the CPU only; load the "
@@ -112,7 +116,11 @@ def predict_lattice(model, lattice, *, mode: str = "band", tile: int | None = No
         model.eval()
     step = 2 ** model.levels
     shape = lattice.shape
-    padded = np.pad(lattice, [(0, -n % step) for n in shape], mode="edge")
+    # an empty last layer repeated is the empty margin; an occupied one is repeated as before
+    # (outside the lattice is then not known to be empty)
+    margin = [0 if np.take(lattice, -1, axis).any() else high_margin for axis in range(3)]
+    padded = np.pad(lattice, [(0, m + -(n + m) % step) for n, m in zip(shape, margin)],
+                    mode="edge")
     report = _Reporter(progress, cancel)
     if mode == "dense":
         pred = _predict_dense(model, padded, report)

@@ -19,6 +19,12 @@ class Method:
         mesh_only: contours the source mesh's own surface (needs a mesh, not a grid).
         bounded: its dual vertices can be put on a voxelised mesh's bounding box.
         in_blender: offered by the Blender add-on.
+        high_margin: empty lattice points a learned method's network is run with past the
+            lattice's high end (``inference.predict_lattice``). Training frames every shape one
+            lattice layer nearer the low end than the high end; the shipped AGNDC puts a face
+            next to the high border up to a quarter voxel too far out, and 2-4 more empty points
+            there bring it to the low faces' depth (docs/experiments/high-border-margin.md).
+            A multiple of the coarsest pooling step (4) keeps the lattice's pooling phase.
     """
 
     name: str
@@ -29,11 +35,12 @@ class Method:
     mesh_only: bool = False
     bounded: bool = False
     in_blender: bool = False
+    high_margin: int = 0
 
 
 REGISTRY = (
     Method("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring (shipped "
-           "weights)", weights="agndc", bounded=True, in_blender=True),
+           "weights)", weights="agndc", bounded=True, in_blender=True, high_margin=4),
     Method("agndc_fast", "AGNDC Fast", "AGNDC distilled for speed (no snake convolutions or "
            "attention): 1.5x as fast, as close to the surface, weaker on some creases (shipped "
            "weights)", title="AGNDC fast (distilled)", weights="agndc_student", bounded=True,

@@ -49,6 +49,7 @@ from .errors import AGNDCError, MeshError
 from .grid import LATTICE_PAD, VoxelGrid, crossed_edges, lattice_to_world, pad_to_lattice
 from .methods import (  # noqa: F401  (the registry's lists, re-exported: one definition)
     BOUNDED_METHODS,
+    BY_NAME,
     CHECKPOINT_NAMES,
     MESH_ONLY_METHODS,
     METHODS,
@@ -468,7 +469,7 @@ def _predict(method, lattice, labels, checkpoint, threads, device, tile, progres
     # the edges of a binary grid are its own: the network's vertices are all contouring needs
     vertex, _ = predict_lattice(model, lattice, device=None if device == "cpu" else device,
                                 tile=tile, progress=progress, cancel=cancel, canonical=reframe,
-                                edges=False)
+                                edges=False, high_margin=BY_NAME[method].high_margin)
     return vertex
 
 

@@ -187,6 +187,41 @@ def test_the_prediction_does_not_depend_on_the_empty_margins(net):
     assert np.abs(raw - vertex)[surface_cells(crossed_edges(lattice))].max() > 1e-3
 
 
+def test_the_network_sees_empty_points_past_the_high_end(net):
+    """``high_margin``: the network runs on the lattice with that many empty points after its
+    high end, exactly as on a lattice that had them, cropped back; an axis whose last layer is
+    occupied gets none (what lies beyond it is not known to be empty)."""
+    lattice = _framed_shape()
+    own = tuple(slice(0, n) for n in lattice.shape)
+    vertex, edge = predict_lattice(net, lattice, high_margin=4)
+    wide = np.pad(lattice, [(0, 4)] * 3)
+    for ours, theirs in zip((vertex, edge), predict_lattice(net, wide, canonical=False)):
+        np.testing.assert_array_equal(theirs[own], ours)
+    cells = surface_cells(crossed_edges(lattice))
+    assert np.abs(predict_lattice(net, lattice)[0] - vertex)[cells].max() > 1e-3
+    cut = lattice[:np.nonzero(lattice.any(axis=(1, 2)))[0][-1]]  # cut through the shape in x
+    assert np.take(cut, -1, 0).any()
+    wide_yz = np.pad(cut, [(0, 0)] + [(0, 4)] * 2)
+    np.testing.assert_array_equal(
+        predict_lattice(net, wide_yz, canonical=False)[0][:, :cut.shape[1], :cut.shape[2]],
+        predict_lattice(net, cut, canonical=False, high_margin=4)[0])
+
+
+def test_each_learned_method_runs_with_its_own_high_margin():
+    """The pipeline runs AGNDC with its high margin and UNDC with none (methods.Method)."""
+    from agndc_core.methods import BY_NAME
+    from agndc_core.pipeline import _default_checkpoint, _predict, load_model
+
+    lattice = _framed_shape()
+    assert BY_NAME["agndc"].high_margin == 4 and BY_NAME["undc"].high_margin == 0
+    for name in ("agndc", "undc"):
+        ours = _predict(name, lattice, None, None, 1, "cpu", None, None, None)
+        model = load_model(_default_checkpoint(name))
+        expected = predict_lattice(model, lattice, edges=False,
+                                   high_margin=BY_NAME[name].high_margin)[0]
+        np.testing.assert_array_equal(ours, expected)
+
+
 def test_remesh_of_a_grid_ignores_its_empty_margins():
     """The same voxels with 3 more empty layers in front give the same mesh, 3 voxels along
     (the shipped network, through pipeline.remesh; remesh_mesh's grids are voxelised already)."""
