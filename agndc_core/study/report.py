@@ -38,18 +38,25 @@ from .evaluate import (
 REPORT_METHODS = ("mc", "mc_taubin", "surfacenets", "undc", "agndc", "agndc_fast",
                   "oracle_binary", "oracle", "surfacenets+bounds", "undc+bounds", "agndc+bounds")
 CATEGORY_ORDER = ("CAD", "organic", "Thingi10K")
-#: shapes of the picture: file stems of the evaluated folder, or ``ROTATED_BOX`` (built here)
-FIGURE_SHAPES = ("fandisk", "rotated_box", "bunny_oded")
-#: (column title, method); "ground truth" is the source mesh itself
-#: (title, method, remesh options); the unfiltered AGNDC shows what the normal filter adds
+#: shapes of the picture: file stems of the evaluated folder, or names of ``SYNTHETIC_SHAPES``
+#: (built here). A CAD part, a part whose flat faces are slightly off the axes, a box turned far
+#: off them, an organic model and a printed part.
+FIGURE_SHAPES = ("fandisk", "tilted_bracket", "rotated_box", "bunny_oded", "97171")
+#: (column title, method, remesh options); method None: the ground truth, the source mesh itself
 FIGURE_COLUMNS = (("marching cubes", "mc", {}), ("surface nets", "surfacenets", {}),
-                  ("AGNDC, unfiltered", "agndc", {"normal_filter": False}),
-                  ("AGNDC", "agndc", {}), ("ground truth", None, {}))
-#: the synthetic figure shape: a box turned off the grid axes, so its flat faces and sharp edges
-#: cross voxels at every angle (marching cubes and surface nets staircase it)
+                  ("UNDC", "undc", {}), ("AGNDC", "agndc", {}), ("ground truth", None, {}))
+#: the synthetic figure shapes. The rotated box is turned far off the grid axes, so its flat faces
+#: and sharp edges cross voxels at every angle (marching cubes and surface nets staircase it).
+#: The tilted bracket (an L of two plates with a hole through each) is turned a few degrees, as a
+#: CAD part is that was modelled off the grid: its large faces cross a voxel layer only every
+#: ~20 voxels, the case where learned vertices come out wavy.
 ROTATED_BOX = "rotated_box"
 ROTATED_BOX_EXTENTS = (1.0, 0.7, 0.5)
 ROTATED_BOX_DEGREES = ((20.0, (1.0, 0.0, 0.0)), (35.0, (0.0, 1.0, 0.0)))
+TILTED_BRACKET = "tilted_bracket"
+TILTED_BRACKET_DEGREES = 2.5
+#: the turn's axis: oblique, so that every face of the bracket is tilted
+TILTED_BRACKET_AXIS = (1.0, 0.6, 0.35)
 
 
 def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
@@ -84,14 +91,13 @@ def build_report(folder, out_md, *, resolutions=(64,), methods=REPORT_METHODS,
     figure = out_md.parent / f"{out_md.stem}_shapes.png"
     pictured = render_figure(meshes, figure_shapes, figure, resolution=resolutions[0])
     text = _markdown(rows, resolutions, methods, figure if pictured else None, rows_dir, command,
-                     n_samples, ablation_rows, rotated_box_shown=ROTATED_BOX in figure_shapes,
-                     shifted=shifted)
+                     n_samples, ablation_rows, figure_shapes=figure_shapes, shifted=shifted)
     out_md.write_text(text)
     return out_md
 
 
 def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
-              ablation_rows, *, rotated_box_shown=False, shifted=()) -> str:
+              ablation_rows, *, figure_shapes=(), shifted=()) -> str:
     lines = ["# AGNDC results on the dev meshes", ""]
     lines += [f"Produced by `{command}` on {datetime.date.today().isoformat()}, "
               f"{platform.machine()} with {os.cpu_count()} CPU cores, numpy "
@@ -145,12 +151,7 @@ def _markdown(rows, resolutions, methods, figure, rows_dir, command, n_samples,
                                         f"{r['error']}" for r in errors] + [""]
     if figure is not None:
         titles = ", ".join(title for title, _, _ in FIGURE_COLUMNS)
-        caption = f"Columns: {titles} at {resolutions[0]}³, edges drawn over the shading."
-        if rotated_box_shown:
-            turns = " and ".join(f"{a:g}° about {'xyz'[int(np.argmax(v))]}"
-                                 for a, v in ROTATED_BOX_DEGREES)
-            caption += (f" The rotated box is a {' × '.join(str(e) for e in ROTATED_BOX_EXTENTS)}"
-                        f" box turned {turns}.")
+        caption = figure_caption(resolutions[0], figure_shapes)
         lines += ["## Picture", "", f"![{titles}]({figure.name})", "", caption, ""]
     lines += [f"Every row: `{rows_dir.name}/rows.csv` (raw metrics, faces, seconds, errors).", ""]
     return "\n".join(lines)
@@ -349,7 +350,8 @@ def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS,
     ``columns`` (method None: the ground truth). False if none. With ``colours``, written as a
     palette PNG of that many colours (``save_small_png``).
 
-    ``names`` are file stems of ``meshes`` or ``ROTATED_BOX``; names found nowhere are skipped.
+    ``names`` are file stems of ``meshes`` or keys of ``SYNTHETIC_SHAPES``; names found nowhere
+    are skipped.
     """
     import matplotlib
 
@@ -385,14 +387,30 @@ def render_figure(meshes, names, path, *, resolution=64, columns=FIGURE_COLUMNS,
     return True
 
 
+def figure_caption(resolution: int, names) -> str:
+    """The picture's caption: its columns and what the synthetic shapes among ``names`` are."""
+    titles = ", ".join(title for title, _, _ in FIGURE_COLUMNS)
+    caption = f"Columns: {titles} at {resolution}³, edges drawn over the shading."
+    if TILTED_BRACKET in names:
+        caption += (" The tilted bracket is an L of two plates with a hole through each, turned "
+                    f"{TILTED_BRACKET_DEGREES:g}° about an oblique axis, so its large faces are "
+                    "slightly off the grid axes.")
+    if ROTATED_BOX in names:
+        turns = " and ".join(f"{a:g}° about {'xyz'[int(np.argmax(v))]}"
+                             for a, v in ROTATED_BOX_DEGREES)
+        caption += (f" The rotated box is a {' × '.join(str(e) for e in ROTATED_BOX_EXTENTS)}"
+                    f" box turned {turns}.")
+    return caption
+
+
 def _figure_shapes(meshes, names) -> list[tuple]:
     """(name, category, (V, 3) float vertices, (F, 3) int faces) for each name that exists."""
     from ..gridio import load_mesh
 
     chosen = []
     for name in names:
-        if name == ROTATED_BOX:
-            chosen.append((name, "synthetic", *rotated_box()))
+        if name in SYNTHETIC_SHAPES:
+            chosen.append((name, "synthetic", *SYNTHETIC_SHAPES[name]()))
             continue
         for mesh_path, category in meshes:
             if Path(mesh_path).stem == name:
@@ -409,6 +427,34 @@ def rotated_box():
     for degrees, axis in ROTATED_BOX_DEGREES:
         mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(degrees), axis))
     return np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+
+
+def tilted_bracket():
+    """The figure's ``TILTED_BRACKET``: (V, 3) float64 vertices, (F, 3) int64 faces, outward.
+
+    A base plate 1.0 x 0.6 x 0.14 and an upright plate 0.14 x 0.6 x 0.5 on its end, each with a
+    round hole through it, turned ``TILTED_BRACKET_DEGREES`` about ``TILTED_BRACKET_AXIS``.
+    """
+    import trimesh
+    from manifold3d import Manifold
+
+    base = Manifold.cube((1.0, 0.6, 0.14))
+    upright = Manifold.cube((0.14, 0.6, 0.5)).translate((0.0, 0.0, 0.14))
+    base_hole = Manifold.cylinder(0.4, 0.1, 0.1, 64).translate((0.6, 0.3, -0.1))
+    upright_hole = (Manifold.cylinder(0.4, 0.09, 0.09, 64)
+                    .rotate((0.0, 90.0, 0.0)).translate((-0.1, 0.3, 0.42)))
+    part = (base + upright) - base_hole - upright_hole
+    part = part.translate((-0.5, -0.3, -0.32))
+    mesh = part.to_mesh()
+    vertices = np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3]
+    turn = trimesh.transformations.rotation_matrix(np.radians(TILTED_BRACKET_DEGREES),
+                                                   TILTED_BRACKET_AXIS)
+    vertices = vertices @ turn[:3, :3].T
+    return vertices, np.asarray(mesh.tri_verts, dtype=np.int64)
+
+
+#: the figure's synthetic shapes by name: a function returning (vertices, faces)
+SYNTHETIC_SHAPES = {ROTATED_BOX: rotated_box, TILTED_BRACKET: tilted_bracket}
 
 
 def voxel_faces(grid):

@@ -25,7 +25,17 @@ from agndc_core.study.evaluate import (
     summarize_rows,
     write_report,
 )
-from agndc_core.study.report import REPORT_METHODS, build_report, rotated_box, voxel_faces
+from agndc_core.study.report import (
+    FIGURE_SHAPES,
+    REPORT_METHODS,
+    SYNTHETIC_SHAPES,
+    TILTED_BRACKET_DEGREES,
+    build_report,
+    figure_caption,
+    rotated_box,
+    tilted_bracket,
+    voxel_faces,
+)
 
 
 def test_voxel_faces_of_a_block_is_its_closed_box():
@@ -114,6 +124,31 @@ def test_rotated_box_is_a_closed_turned_box():
     mesh = trimesh.Trimesh(vertices, faces)
     assert mesh.is_watertight and np.isclose(mesh.volume, 1.0 * 0.7 * 0.5)
     assert not np.allclose(np.abs(mesh.face_normals).max(axis=1), 1.0)  # off the axes
+
+
+def test_tilted_bracket_is_a_closed_part_a_few_degrees_off_the_axes():
+    vertices, faces = tilted_bracket()
+    mesh = trimesh.Trimesh(vertices, faces)
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+    # two plates less two holes: 0.126 less 0.14 * pi * (0.1^2 + 0.09^2), up to the 64-gons
+    assert mesh.volume == pytest.approx(0.126 - 0.14 * np.pi * (0.01 + 0.0081), rel=2e-3)
+    # no face lies on a grid axis; the plates' faces (all but the holes' walls, ~90 % of the
+    # area) are within the turn of one
+    off_axis = np.degrees(np.arccos(np.abs(mesh.face_normals).max(axis=1).clip(max=1.0)))
+    plates = off_axis <= TILTED_BRACKET_DEGREES + 1e-6
+    assert off_axis.min() > 0.5
+    assert 0.85 < mesh.area_faces[plates].sum() / mesh.area < 0.97
+
+
+def test_the_picture_shows_a_cad_part_a_tilted_part_an_organic_and_a_printed_part():
+    assert set(SYNTHETIC_SHAPES) <= set(FIGURE_SHAPES)
+    for name in SYNTHETIC_SHAPES:
+        vertices, faces = SYNTHETIC_SHAPES[name]()
+        assert trimesh.Trimesh(vertices, faces).is_watertight
+    caption = figure_caption(64, FIGURE_SHAPES)
+    assert caption.startswith("Columns: marching cubes, surface nets, UNDC, AGNDC, ground truth")
+    assert "tilted bracket" in caption and "rotated box" in caption
+    assert "tilted bracket" not in figure_caption(64, ("fandisk",))
 
 
 @pytest.mark.slow
