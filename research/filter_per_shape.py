@@ -1,0 +1,131 @@
+"""``agndc eval`` with the normal filter chosen per mesh: the shipped filter, none, or none on
+the meshes ``wrinkled_surface`` calls wrinkled all over (scan-like organic shapes) and the
+shipped filter on the others.
+
+The bilateral filter removes the network's cell-to-cell noise and flattens whatever bends as
+little over a few cells: on wrinkled figurines that is the surface itself, and the filter costs
+them 1-11 % of their CD while every other kind of shape gains from it
+(docs/experiments/normal-filter.md, "No filter on wrinkled surfaces").
+
+    .venv/bin/python research/filter_per_shape.py DATA -o OUT --where wrinkled --res 128
+    .venv/bin/python research/filter_per_shape.py DATA -o OUT --where none --log OUT.txt \\
+        --cache runs/pred_cache
+
+``--log`` appends, per remeshed grid, its vertex count and the shares of its vertices on planar
+patches, at creases and on detail (what the rule reads). ``--cache`` keeps each grid's network
+prediction on disk, so that the variants rerun only contouring, filter and metrics.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+from stage_eval import eval_parser, run_eval, run_eval_with_prediction
+
+#: a wrinkled surface: few vertices on planar patches, and a middle share on detail (tubes
+#: curved at the scale of a cell, like a knot, have nearly all their vertices on detail)
+WRINKLED_PLANAR_SHARE = 0.07
+WRINKLED_DETAIL_SHARE = (0.4, 0.9)
+
+
+def wrinkled_surface(vertices, faces, params, planar_v, check=None) -> bool:
+    """True for a mesh whose surface is wrinkled all over (a scan-like organic shape): under
+    ``WRINKLED_PLANAR_SHARE`` of its vertices on planar patches, and the share of vertices whose
+    filtered normals spread more than ``params.detail_degrees`` within ``WRINKLED_DETAIL_SHARE``."""
+    from agndc_core import normalfilter as nf
+
+    if planar_v is None or np.mean(planar_v) >= WRINKLED_PLANAR_SHARE:
+        return False
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    vertices = np.asarray(vertices, dtype=np.float64)
+    original, areas, centroids = nf.face_geometry(vertices, faces)
+    incidence = nf.vertex_faces(faces, len(vertices))
+    normals = nf.bilateral_normals(original, areas, centroids, nf.face_neighbours(incidence),
+                                   params, check)
+    detail = np.mean(nf.normal_spread(faces, incidence, normals) > params.detail_degrees)
+    return WRINKLED_DETAIL_SHARE[0] <= detail <= WRINKLED_DETAIL_SHARE[1]
+
+
+def logged(filter_mesh, log: Path, params):
+    """``filter_mesh`` that first appends "vertices planar_share crease_share" to ``log``."""
+    from agndc_core import normalfilter as nf
+
+    def run(vertices, faces, _params=None, fixed_vx3=None, check=None, planar_v=None):
+        faces_ = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        vertices_ = np.asarray(vertices, dtype=np.float64)
+        original, areas, centroids = nf.face_geometry(vertices_, faces_)
+        incidence = nf.vertex_faces(faces_, len(vertices_))
+        normals = nf.bilateral_normals(original, areas, centroids,
+                                       nf.face_neighbours(incidence), params, check)
+        spread = nf.normal_spread(faces_, incidence, normals)
+        planar = 0.0 if planar_v is None else float(np.mean(planar_v))
+        with open(log, "a") as handle:
+            handle.write(f"{len(vertices_)} {planar:.5f} "
+                         f"{np.mean(spread > params.crease_degrees):.5f} "
+                         f"{np.mean(spread > params.detail_degrees):.5f}\n")
+        return filter_mesh(vertices, faces, _params, fixed_vx3, check, planar_v)
+
+    return run
+
+
+def cached(cache: Path):
+    """A ``run_eval_with_prediction`` replacement that keeps each prediction on disk."""
+    cache.mkdir(parents=True, exist_ok=True)
+
+    def replace(method, lattice, predict):
+        key = hashlib.sha1(np.ascontiguousarray(lattice).tobytes()
+                           + str((method, lattice.shape)).encode()).hexdigest()
+        path = cache / f"{key}.npy"
+        if path.exists():
+            return np.load(path)
+        vertex = predict(method, lattice)
+        np.save(path, vertex)
+        return vertex
+
+    return replace
+
+
+def main() -> None:
+    parser = eval_parser(__doc__, methods=False)
+    parser.add_argument("--where", choices=("off", "none", "wrinkled"), default="wrinkled",
+                        help="off: the shipped filter (the control, through the same cache); "
+                        "none: no filter; wrinkled: no filter on a mesh that wrinkled_surface() "
+                        "calls wrinkled, the shipped filter on the others")
+    parser.add_argument("--log", type=Path, default=None, help="append, per filtered mesh: "
+                        "vertices, and the shares on planar patches, at creases and on detail")
+    parser.add_argument("--cache", type=Path, default=None)
+    args = parser.parse_args()
+
+    from agndc_core import normalfilter
+
+    params = normalfilter.DEFAULT
+    plain = normalfilter.filter_mesh
+    if args.where == "none":
+        def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
+                        planar_v=None):
+            return np.asarray(vertices, dtype=np.float64).copy()
+    elif args.where == "wrinkled":
+        def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
+                        planar_v=None):
+            if wrinkled_surface(vertices, faces, params, planar_v, check):
+                return np.asarray(vertices, dtype=np.float64).copy()
+            return plain(vertices, faces, params, fixed_vx3, check, planar_v)
+    else:
+        def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
+                        planar_v=None):
+            return plain(vertices, faces, params, fixed_vx3, check, planar_v)
+    if args.log is not None:
+        normalfilter.filter_mesh = logged(replacement, args.log, params)
+    else:
+        normalfilter.filter_mesh = replacement
+    print(params, args.where)
+    if args.cache is None:
+        run_eval(args)
+    else:
+        run_eval_with_prediction(args, cached(args.cache))
+
+
+if __name__ == "__main__":
+    main()
