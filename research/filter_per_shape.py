@@ -1,13 +1,13 @@
-"""``agndc eval`` with the normal filter chosen per mesh: the shipped filter, none, or none on
-the meshes ``wrinkled_surface`` calls wrinkled all over (scan-like organic shapes) and the
-shipped filter on the others.
+"""``agndc eval`` with the normal filter chosen per mesh: as shipped (no vertex update on a mesh
+that ``normalfilter.wrinkled_surface`` calls wrinkled all over, a scan-like organic shape), on
+every mesh, or on none.
 
 The bilateral filter removes the network's cell-to-cell noise and flattens whatever bends as
 little over a few cells: on wrinkled figurines that is the surface itself, and the filter costs
 them 1-11 % of their CD while every other kind of shape gains from it
 (docs/experiments/normal-filter.md, "No filter on wrinkled surfaces").
 
-    .venv/bin/python research/filter_per_shape.py DATA -o OUT --where wrinkled --res 128
+    .venv/bin/python research/filter_per_shape.py DATA -o OUT --where always --res 128
     .venv/bin/python research/filter_per_shape.py DATA -o OUT --where none --log OUT.txt \\
         --cache runs/pred_cache
 
@@ -23,29 +23,6 @@ from pathlib import Path
 
 import numpy as np
 from stage_eval import eval_parser, run_eval, run_eval_with_prediction
-
-#: a wrinkled surface: few vertices on planar patches, and a middle share on detail (tubes
-#: curved at the scale of a cell, like a knot, have nearly all their vertices on detail)
-WRINKLED_PLANAR_SHARE = 0.07
-WRINKLED_DETAIL_SHARE = (0.4, 0.9)
-
-
-def wrinkled_surface(vertices, faces, params, planar_v, check=None) -> bool:
-    """True for a mesh whose surface is wrinkled all over (a scan-like organic shape): under
-    ``WRINKLED_PLANAR_SHARE`` of its vertices on planar patches, and the share of vertices whose
-    filtered normals spread more than ``params.detail_degrees`` within ``WRINKLED_DETAIL_SHARE``."""
-    from agndc_core import normalfilter as nf
-
-    if planar_v is None or np.mean(planar_v) >= WRINKLED_PLANAR_SHARE:
-        return False
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    original, areas, centroids = nf.face_geometry(vertices, faces)
-    incidence = nf.vertex_faces(faces, len(vertices))
-    normals = nf.bilateral_normals(original, areas, centroids, nf.face_neighbours(incidence),
-                                   params, check)
-    detail = np.mean(nf.normal_spread(faces, incidence, normals) > params.detail_degrees)
-    return WRINKLED_DETAIL_SHARE[0] <= detail <= WRINKLED_DETAIL_SHARE[1]
 
 
 def logged(filter_mesh, log: Path, params):
@@ -89,29 +66,26 @@ def cached(cache: Path):
 
 def main() -> None:
     parser = eval_parser(__doc__, methods=False)
-    parser.add_argument("--where", choices=("off", "none", "wrinkled"), default="wrinkled",
-                        help="off: the shipped filter (the control, through the same cache); "
-                        "none: no filter; wrinkled: no filter on a mesh that wrinkled_surface() "
-                        "calls wrinkled, the shipped filter on the others")
+    parser.add_argument("--where", choices=("shipped", "always", "none"), default="shipped",
+                        help="shipped: the pipeline's filter (wrinkled surfaces left alone); "
+                        "always: the filter on every mesh; none: no filter")
     parser.add_argument("--log", type=Path, default=None, help="append, per filtered mesh: "
                         "vertices, and the shares on planar patches, at creases and on detail")
     parser.add_argument("--cache", type=Path, default=None)
     args = parser.parse_args()
 
+    import dataclasses
+
     from agndc_core import normalfilter
 
     params = normalfilter.DEFAULT
+    if args.where == "always":  # no mesh has under 0 % of its vertices on planar patches
+        params = dataclasses.replace(params, wrinkled_planar_share=0.0)
     plain = normalfilter.filter_mesh
     if args.where == "none":
         def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
                         planar_v=None):
             return np.asarray(vertices, dtype=np.float64).copy()
-    elif args.where == "wrinkled":
-        def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
-                        planar_v=None):
-            if wrinkled_surface(vertices, faces, params, planar_v, check):
-                return np.asarray(vertices, dtype=np.float64).copy()
-            return plain(vertices, faces, params, fixed_vx3, check, planar_v)
     else:
         def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
                         planar_v=None):

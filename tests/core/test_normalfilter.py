@@ -14,6 +14,9 @@ from agndc_core.normalfilter import (
     filter_mesh,
     filter_mesh_naive,
     keep_orientation,
+    normal_spread,
+    vertex_faces,
+    wrinkled_surface,
 )
 from agndc_core.pipeline import remesh, taubin_smooth
 
@@ -119,6 +122,58 @@ def test_detail_takes_the_lighter_update():
     lost = [float(np.sqrt(np.mean(np.sum((out - wrinkled) ** 2, axis=1))))
             for out in (full, light)]  # RMS of what the filter took
     assert lost[1] < 0.85 * lost[0]
+
+
+def _ellipsoid(subdivisions, semi_axes):
+    """An icosphere scaled to an ellipsoid, in lattice units (edges ~1.2-1.5 long below)."""
+    sphere = trimesh.creation.icosphere(subdivisions)
+    return (np.asarray(sphere.vertices) * np.asarray(semi_axes, dtype=np.float64),
+            np.asarray(sphere.faces))
+
+
+def _spread(vertices, faces, params=None):
+    params = params or NormalFilter()
+    original, areas, centroids = face_geometry(vertices, faces)
+    incidence = vertex_faces(faces, len(vertices))
+    from agndc_core.normalfilter import bilateral_normals, face_neighbours
+
+    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params)
+    return normal_spread(faces, incidence, normals)
+
+
+def test_a_wrinkled_surface_is_one_with_few_planar_vertices_and_a_middle_share_on_detail():
+    params = NormalFilter()
+    # an ellipsoid bent at the scale of a few cells over ~65 % of its vertices: in the band
+    bent, faces = _ellipsoid(3, (8, 8, 16))
+    spread = _spread(bent, faces)
+    assert 0.5 < np.mean(spread > params.detail_degrees) < 0.8
+    none = np.zeros(len(bent), dtype=bool)
+    assert wrinkled_surface(spread, none, params)
+    # 10 % of its vertices on planar patches (a part, not a scan), or a narrower band: filtered
+    some = np.arange(len(bent)) < 0.1 * len(bent)
+    assert not wrinkled_surface(spread, some, params)
+    assert not wrinkled_surface(spread, none, NormalFilter(wrinkled_detail_share=(0.8, 0.9)))
+    # a large sphere (nothing on detail) and a small one (everything, like a knot's tube)
+    for semi_axes, subdivisions in (((20, 20, 20), 4), ((4, 4, 4), 2)):
+        ball, ball_faces = _ellipsoid(subdivisions, semi_axes)
+        assert not wrinkled_surface(_spread(ball, ball_faces), np.zeros(len(ball), bool), params)
+    assert not wrinkled_surface(np.zeros(0), np.zeros(0, dtype=bool), params)
+
+
+def test_a_wrinkled_surface_keeps_the_networks_vertices():
+    bent, faces = _ellipsoid(3, (8, 8, 16))
+    noisy = bent + np.random.default_rng(4).normal(0.0, 0.1, bent.shape)
+    none = np.zeros(len(bent), dtype=bool)
+    assert wrinkled_surface(_spread(noisy, faces), none)
+    for run in (filter_mesh, filter_mesh_naive):
+        np.testing.assert_array_equal(run(noisy, faces, planar_v=none), noisy)
+        # without planar vertices to read (planar_v None) the filter does not judge: it filters
+        assert not np.allclose(run(noisy, faces), noisy)
+    some = np.arange(len(bent)) < 0.1 * len(bent)
+    filtered = filter_mesh(noisy, faces, planar_v=some)
+    assert not np.allclose(filtered, noisy)
+    np.testing.assert_allclose(filtered, filter_mesh_naive(noisy, faces, planar_v=some),
+                               atol=1e-12)
 
 
 def test_faces_flatten_while_corners_stay():

@@ -204,27 +204,3 @@ def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
     assert not routing.thin_cells(pad_to_lattice(grid), 3, radius=3)[surface(
         pad_to_lattice(grid))].any()
 
-
-def test_a_surface_is_wrinkled_only_with_few_planar_vertices_and_a_middle_share_on_detail():
-    import numpy as np
-    import trimesh
-
-    from agndc_core.normalfilter import DEFAULT
-
-    wrinkled_surface = research_script("filter_per_shape").wrinkled_surface
-
-    def case(subdivisions, semi_axes, planar_share=0.0):
-        # lattice units: the filter runs where one cell is one unit, edges ~1.2-1.5 long here
-        sphere = trimesh.creation.icosphere(subdivisions)
-        vertices = sphere.vertices * np.asarray(semi_axes, dtype=np.float64)
-        planar = np.arange(len(vertices)) < planar_share * len(vertices)
-        return wrinkled_surface(vertices, sphere.faces, DEFAULT, planar)
-
-    # an ellipsoid bent at the scale of a few cells over ~65 % of its vertices: in the band
-    assert case(3, (8, 8, 16))
-    # the same with 10 % of its vertices on planar patches (a part, not a scan): filtered
-    assert not case(3, (8, 8, 16), planar_share=0.10)
-    # a large sphere (nothing on detail) and a small one (everything on detail, like a knot's
-    # tube): filtered
-    assert not case(4, (20, 20, 20))
-    assert not case(2, (4, 4, 4))
