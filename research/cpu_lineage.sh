@@ -11,7 +11,7 @@
 # stage 5's learning rate 1e-4 and EMA 0.99, a checkpoint at 400 and 800 to score on the
 # validation family. Stage 9: stage 8's final weights continued 800 steps on the same data at
 # half its learning rate and a slower EMA (0.995). Neither beat the shipped weights on the
-# validation family (docs/experiments/cpu-continuations.md). Stage 10: the shipped weights
+# validation family (docs/experiments/sheet-training.md). Stage 10: the shipped weights
 # continued on their own recipe (stage 6's data, DATA and the sheets, learning rate 5e-5, EMA
 # 0.995) with a new seed, a checkpoint at 400 and 800: how far a continuation of the recipe
 # moves the validation score. A stage is kept short (about 80 min where a

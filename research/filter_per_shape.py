@@ -26,7 +26,8 @@ from stage_eval import eval_parser, run_eval, run_eval_with_prediction
 
 
 def logged(filter_mesh, log: Path, params):
-    """``filter_mesh`` that first appends "vertices planar_share crease_share" to ``log``."""
+    """``filter_mesh`` that first appends "vertices planar_share crease_share detail_share"
+    to ``log``."""
     from agndc_core import normalfilter as nf
 
     def run(vertices, faces, _params=None, fixed_vx3=None, check=None, planar_v=None):
