@@ -203,4 +203,3 @@ def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
     grid[5:17, 5:17, 5:17] = True
     assert not routing.thin_cells(pad_to_lattice(grid), 3, radius=3)[surface(
         pad_to_lattice(grid))].any()
-
