@@ -102,10 +102,7 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
     faces = np.asarray(faces_fx3, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return vertices.copy()
-    original, areas, centroids = face_geometry(vertices, faces)
-    incidence = vertex_faces(faces, len(vertices))
-    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params,
-                                check)
+    original, incidence, normals = filtered_normals(vertices, faces, params, check)
     passes = None
     if planar_v is not None:
         spread = normal_spread(faces, incidence, normals)
@@ -114,6 +111,18 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
         passes = vertex_passes(faces, incidence, normals, planar_v, params, spread)
     return fit_vertices(vertices, faces, incidence, normals, original, params.vertex_iterations,
                         fixed_vx3, check, passes)
+
+
+def filtered_normals(vertices: np.ndarray, faces: np.ndarray, params: NormalFilter = DEFAULT,
+                     check=None):
+    """The filter's first half on (V, 3) float64 ``vertices`` and (F, 3) int64 ``faces``:
+    (original (F, 3) unnormalised face normals, (V, F) ``vertex_faces`` incidence, (F, 3)
+    bilaterally filtered unit normals)."""
+    original, areas, centroids = face_geometry(vertices, faces)
+    incidence = vertex_faces(faces, len(vertices))
+    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params,
+                                check)
+    return original, incidence, normals
 
 
 def normal_spread(faces, incidence, normals) -> np.ndarray:

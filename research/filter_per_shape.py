@@ -33,10 +33,7 @@ def logged(filter_mesh, log: Path, params):
     def run(vertices, faces, _params=None, fixed_vx3=None, check=None, planar_v=None):
         faces_ = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         vertices_ = np.asarray(vertices, dtype=np.float64)
-        original, areas, centroids = nf.face_geometry(vertices_, faces_)
-        incidence = nf.vertex_faces(faces_, len(vertices_))
-        normals = nf.bilateral_normals(original, areas, centroids,
-                                       nf.face_neighbours(incidence), params, check)
+        _, incidence, normals = nf.filtered_normals(vertices_, faces_, params, check)
         spread = nf.normal_spread(faces_, incidence, normals)
         planar = 0.0 if planar_v is None else float(np.mean(planar_v))
         with open(log, "a") as handle:

@@ -13,9 +13,9 @@ from agndc_core.normalfilter import (
     face_geometry,
     filter_mesh,
     filter_mesh_naive,
+    filtered_normals,
     keep_orientation,
     normal_spread,
-    vertex_faces,
     wrinkled_surface,
 )
 from agndc_core.pipeline import remesh, taubin_smooth
@@ -133,11 +133,7 @@ def _ellipsoid(subdivisions, semi_axes):
 
 def _spread(vertices, faces, params=None):
     params = params or NormalFilter()
-    original, areas, centroids = face_geometry(vertices, faces)
-    incidence = vertex_faces(faces, len(vertices))
-    from agndc_core.normalfilter import bilateral_normals, face_neighbours
-
-    normals = bilateral_normals(original, areas, centroids, face_neighbours(incidence), params)
+    _, incidence, normals = filtered_normals(vertices, faces, params)
     return normal_spread(faces, incidence, normals)
 
 
