@@ -203,3 +203,50 @@ def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
     grid[5:17, 5:17, 5:17] = True
     assert not routing.thin_cells(pad_to_lattice(grid), 3, radius=3)[surface(
         pad_to_lattice(grid))].any()
+
+
+def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
+    """flat_terraces: a floor one voxel below its rim is a terrace; with flat network
+    coordinates it goes to the midpoint (it lies inside the shape's extent) and the rim, the
+    outermost layer, keeps its mean; noisy coordinates, pinned cells and (one-sided) the middle
+    terraces of a staircase are left alone."""
+    import numpy as np
+
+    from agndc_core.flatpatches import pure_splits
+    from agndc_core.grid import pad_to_lattice
+
+    script = research_script("flat_terraces")
+    grid = np.zeros((30, 30, 30), dtype=bool)
+    grid[5:25, 5:25, 5:15] = True
+    grid[10:20, 10:20, 14] = False  # a recess one voxel deep
+    lattice = pad_to_lattice(grid)
+    up = pure_splits(lattice, 2, True)  # (X-1, Y-1, Z-1): faces whose lower corners are inside
+    layers = np.flatnonzero(up.any(axis=(0, 1)))
+    floor_layer, rim_layer = layers[-2], layers[-1]
+    vertex = np.full(lattice.shape + (3,), 0.8)
+    out = script.flatten_flat_terraces(lattice, vertex.copy(), np.zeros(vertex.shape, bool),
+                                       max_std=0.08, min_cells=16)
+    z = out[:-1, :-1, :-1, 2]
+    assert np.all(z[up[..., floor_layer].nonzero() + (floor_layer,)] == 0.5)
+    np.testing.assert_allclose(z[up[..., rim_layer].nonzero() + (rim_layer,)], 0.8)
+    assert up[..., floor_layer].sum() >= 64
+    noisy = vertex + np.random.default_rng(0).normal(0, 0.2, vertex.shape)
+    out = script.flatten_flat_terraces(lattice, noisy.copy(), np.zeros(vertex.shape, bool),
+                                       max_std=0.08, min_cells=16)
+    np.testing.assert_array_equal(out, noisy)
+    out = script.flatten_flat_terraces(lattice, vertex.copy(), np.ones(vertex.shape, bool),
+                                       max_std=0.08, min_cells=16)
+    np.testing.assert_array_equal(out, vertex)
+    # a staircase along x: its middle terraces step both ways, its end ones one way
+    stairs = np.zeros((40, 20, 20), dtype=bool)
+    for step in range(6):
+        stairs[5 + 5 * step:10 + 5 * step, 5:15, 5:8 + step] = True
+    lattice = pad_to_lattice(stairs)
+    vertex = np.full(lattice.shape + (3,), 0.8)
+    both = script.flatten_flat_terraces(lattice, vertex.copy(), np.zeros(vertex.shape, bool),
+                                        max_std=0.08, min_cells=16)
+    one = script.flatten_flat_terraces(lattice, vertex.copy(), np.zeros(vertex.shape, bool),
+                                       max_std=0.08, min_cells=16, one_sided=True)
+    changed_both = (both[..., 2] == 0.5).sum()
+    changed_one = (one[..., 2] == 0.5).sum()
+    assert changed_both > changed_one > 0

@@ -1,0 +1,110 @@
+"""``agndc eval`` with the terraces that the network itself calls flat flattened too.
+
+``flatpatches.flatten_patches`` leaves a flat patch to the network when a pure split of the same
+kind lies one layer up or down within ``tol.terrace_reach`` cells (a *terrace*: the surface may
+step through the layers there, as a slanted or curved one does), and ``fit_terraced_planes``
+fits the terraces of slightly tilted planes. A flat face one voxel below another (a recessed
+floor, a one-voxel step, a shallow pocket) is a terrace by that test and keeps the network's
+depth, which for faces inside the shape's extent is biased (docs/experiments/flat-patches.md).
+This study flattens, after the terraced-plane fit, every terrace patch that no plane took,
+of at least ``--min-cells`` cells, whose network coordinates along the axis have a standard
+deviation of at most ``--max-std`` voxels (the network sees no slope or curvature across it):
+at the layer's midpoint inside the shape's extent, at the patch's mean on its outermost layers,
+as ``flatten_patches`` does for the patches it flattens.
+
+    .venv/bin/python research/flat_terraces.py DATA -o OUT --max-std 0.08 \\
+        --cache runs/pred_cache
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from filter_per_shape import cached
+from stage_eval import eval_parser, run_eval, run_eval_with_prediction
+
+
+def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: int,
+                          log: Path | None = None, one_sided: bool = False):
+    """Flatten, in place, the terrace patches of ``vertex`` that carry no pinned coordinate
+    and whose coordinates along their axis vary by at most ``max_std`` (standard deviation)."""
+    from scipy import ndimage
+
+    from agndc_core import flatpatches as fp
+    from agndc_core.tolerances import tol
+
+    lattice = np.asarray(lattice, dtype=bool)
+    for axis in range(3):
+        by_mean = fp.mean_depth_layers(lattice, axis)
+        points = np.moveaxis(lattice, axis, -1)
+        coord = np.moveaxis(vertex[..., axis], axis, -1)[:-1, :-1, :-1]
+        pin = np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        for lower_inside in fp.KINDS:
+            split = fp._pure_splits_last(points, lower_inside)
+            patches, count = ndimage.label(split, fp._IN_PLANE)
+            if count == 0:
+                continue
+            terrace = fp.terrace_patches(split, patches, count)
+            # which side each patch's steps go to: a recess floor or a plateau steps one way
+            # only, the terraces of a slanted plane both ways
+            near = ndimage.binary_dilation(split, fp._IN_PLANE, iterations=tol.terrace_reach)
+            below, above = np.zeros_like(split), np.zeros_like(split)
+            below[..., 1:] = near[..., :-1]
+            above[..., :-1] = near[..., 1:]
+            steps_down = np.bincount(patches[split & below], minlength=count + 1) > 0
+            steps_up = np.bincount(patches[split & above], minlength=count + 1) > 0
+            terrace &= ~(steps_down & steps_up) if one_sided else terrace
+            cells = np.nonzero(split & terrace[patches])
+            patch_of = patches[cells]
+            values = coord[cells]
+            size = np.bincount(patch_of, minlength=count + 1)
+            mean = np.bincount(patch_of, values, count + 1) / np.maximum(size, 1)
+            square = np.bincount(patch_of, values ** 2, count + 1) / np.maximum(size, 1)
+            std = np.sqrt(np.maximum(square - mean ** 2, 0.0))
+            taken = np.bincount(patch_of, pin[cells], count + 1) > 0
+            flat = (size >= min_cells) & (std <= max_std) & ~taken
+            keep = flat[patch_of]
+            index = tuple(c[keep] for c in cells)
+            coord[index] = np.where(by_mean[lower_inside][index[2]], mean[patch_of[keep]],
+                                    fp.MIDPOINT)
+            pin[index] = True
+            if log is not None and np.any(flat):
+                with open(log, "a") as handle:
+                    for p in np.flatnonzero(flat):
+                        handle.write(f"{axis} {int(lower_inside)} {size[p]} {mean[p]:.3f} "
+                                     f"{std[p]:.3f}\n")
+    return vertex
+
+
+def main() -> None:
+    parser = eval_parser(__doc__, methods=False)
+    parser.add_argument("--max-std", type=float, default=0.08)
+    parser.add_argument("--min-cells", type=int, default=16)
+    parser.add_argument("--log", type=Path, default=None,
+                        help="append each flattened patch: axis, kind, cells, mean, std")
+    parser.add_argument("--one-sided", action="store_true",
+                        help="only terraces whose steps all go one way (up or down)")
+    parser.add_argument("--cache", type=Path, default=None)
+    args = parser.parse_args()
+
+    from agndc_core import flatpatches
+
+    plain = flatpatches.fit_terraced_planes
+
+    def fit_then_flatten(lattice, vertex, *, in_place=False, pinned=None):
+        vertex = plain(lattice, vertex, in_place=in_place, pinned=pinned)
+        if pinned is None:
+            pinned = np.zeros(vertex.shape, dtype=bool)
+        return flatten_flat_terraces(lattice, vertex, pinned, args.max_std, args.min_cells,
+                                     args.log, args.one_sided)
+
+    flatpatches.fit_terraced_planes = fit_then_flatten
+    if args.cache is None:
+        run_eval(args)
+    else:
+        run_eval_with_prediction(args, cached(args.cache))
+
+
+if __name__ == "__main__":
+    main()
