@@ -14,7 +14,10 @@
 # validation family (docs/experiments/sheet-training.md). Stage 10: the shipped weights
 # continued on their own recipe (stage 6's data, DATA and the sheets, learning rate 5e-5, EMA
 # 0.995) with a new seed, a checkpoint at 400 and 800: how far a continuation of the recipe
-# moves the validation score. A stage is kept short (about 80 min where a
+# moves the validation score (it wanders about the shipped weights, docs/experiments/
+# sheet-training.md). Stage 11: the same, with 900 new training shapes (DATA_fresh, seeds from
+# 40,000) in place of DATA: whether new shapes move what the same shapes did not. A stage is
+# kept short (about 80 min where a
 # step takes ~6 s), since only its run folder carries its state: a new machine starts the stage
 # again.
 #
@@ -78,6 +81,11 @@ current)
         --init "$runs/tilt_agndc16/final.safetensors" --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 16 --steps 800,0,0 --val-steps 400,800
     stage ship_agndc16_seed17 --data "$data,$sheets" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    fresh="${data}_fresh"
+    generate "$fresh" -n 900 --seed0 40000
+    stage fresh_agndc16 --data "$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     ;;
