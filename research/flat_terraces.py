@@ -26,7 +26,8 @@ from stage_eval import eval_parser, run_eval, run_eval_with_prediction
 
 
 def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: int,
-                          log: Path | None = None, one_sided: bool = False):
+                          log: Path | None = None, one_sided: bool = False,
+                          enclosed: float = 0.0):
     """Flatten, in place, the terrace patches of ``vertex`` that carry no pinned coordinate
     and whose coordinates along their axis vary by at most ``max_std`` (standard deviation)."""
     from scipy import ndimage
@@ -55,6 +56,12 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
             steps_down = np.bincount(patches[split & below], minlength=count + 1) > 0
             steps_up = np.bincount(patches[split & above], minlength=count + 1) > 0
             terrace &= ~(steps_down & steps_up) if one_sided else terrace
+            if enclosed > 0:  # the share of a patch's rim cells next to a step
+                inner = ndimage.binary_erosion(split, fp._IN_PLANE, border_value=0)
+                rim = split & ~inner
+                rim_cells = np.bincount(patches[rim], minlength=count + 1)
+                stepped = np.bincount(patches[rim & (below | above)], minlength=count + 1)
+                terrace &= stepped >= enclosed * np.maximum(rim_cells, 1)
             cells = np.nonzero(split & terrace[patches])
             patch_of = patches[cells]
             values = coord[cells]
@@ -85,6 +92,9 @@ def main() -> None:
                         help="append each flattened patch: axis, kind, cells, mean, std")
     parser.add_argument("--one-sided", action="store_true",
                         help="only terraces whose steps all go one way (up or down)")
+    parser.add_argument("--enclosed", type=float, default=0.0,
+                        help="only terraces with at least this share of their rim cells next "
+                        "to a step (a floor or plateau the step surrounds)")
     parser.add_argument("--cache", type=Path, default=None)
     args = parser.parse_args()
 
@@ -97,7 +107,7 @@ def main() -> None:
         if pinned is None:
             pinned = np.zeros(vertex.shape, dtype=bool)
         return flatten_flat_terraces(lattice, vertex, pinned, args.max_std, args.min_cells,
-                                     args.log, args.one_sided)
+                                     args.log, args.one_sided, args.enclosed)
 
     flatpatches.fit_terraced_planes = fit_then_flatten
     if args.cache is None:

@@ -230,6 +230,11 @@ def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
     assert np.all(z[up[..., floor_layer].nonzero() + (floor_layer,)] == 0.5)
     np.testing.assert_allclose(z[up[..., rim_layer].nonzero() + (rim_layer,)], 0.8)
     assert up[..., floor_layer].sum() >= 64
+    # the step surrounds the floor: it is still taken when the step must enclose it
+    enclosed = script.flatten_flat_terraces(lattice, vertex.copy(),
+                                            np.zeros(vertex.shape, bool), max_std=0.08,
+                                            min_cells=16, one_sided=True, enclosed=0.9)
+    np.testing.assert_allclose(enclosed, out)
     noisy = vertex + np.random.default_rng(0).normal(0, 0.2, vertex.shape)
     out = script.flatten_flat_terraces(lattice, noisy.copy(), np.zeros(vertex.shape, bool),
                                        max_std=0.08, min_cells=16)
@@ -250,3 +255,8 @@ def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
     changed_both = (both[..., 2] == 0.5).sum()
     changed_one = (one[..., 2] == 0.5).sum()
     assert changed_both > changed_one > 0
+    # the staircase's end terraces meet a step on one side only: not enclosed
+    enclosed = script.flatten_flat_terraces(lattice, vertex.copy(), np.zeros(vertex.shape, bool),
+                                            max_std=0.08, min_cells=16, one_sided=True,
+                                            enclosed=0.9)
+    np.testing.assert_array_equal(enclosed, vertex)
