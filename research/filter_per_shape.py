@@ -18,11 +18,10 @@ prediction on disk, so that the variants rerun only contouring, filter and metri
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 import numpy as np
-from stage_eval import eval_parser, run_eval, run_eval_with_prediction
+from stage_eval import eval_parser, run_eval_cached
 
 
 def logged(filter_mesh, log: Path, params):
@@ -43,23 +42,6 @@ def logged(filter_mesh, log: Path, params):
         return filter_mesh(vertices, faces, _params, fixed_vx3, check, planar_v)
 
     return run
-
-
-def cached(cache: Path):
-    """A ``run_eval_with_prediction`` replacement that keeps each prediction on disk."""
-    cache.mkdir(parents=True, exist_ok=True)
-
-    def replace(method, lattice, predict):
-        key = hashlib.sha1(np.ascontiguousarray(lattice).tobytes()
-                           + str((method, lattice.shape)).encode()).hexdigest()
-        path = cache / f"{key}.npy"
-        if path.exists():
-            return np.load(path)
-        vertex = predict(method, lattice)
-        np.save(path, vertex)
-        return vertex
-
-    return replace
 
 
 def main() -> None:
@@ -93,10 +75,7 @@ def main() -> None:
     else:
         normalfilter.filter_mesh = replacement
     print(params, args.where)
-    if args.cache is None:
-        run_eval(args)
-    else:
-        run_eval_with_prediction(args, cached(args.cache))
+    run_eval_cached(args)
 
 
 if __name__ == "__main__":

@@ -21,8 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from filter_per_shape import cached
-from stage_eval import eval_parser, run_eval, run_eval_with_prediction
+from stage_eval import eval_parser, run_eval_cached
 
 
 def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: int,
@@ -110,10 +109,7 @@ def main() -> None:
                                      args.log, args.one_sided, args.enclosed)
 
     flatpatches.fit_terraced_planes = fit_then_flatten
-    if args.cache is None:
-        run_eval(args)
-    else:
-        run_eval_with_prediction(args, cached(args.cache))
+    run_eval_cached(args)
 
 
 if __name__ == "__main__":

@@ -1,14 +1,17 @@
 """The arguments and the run shared by the studies that score ``agndc eval`` with one stage of
 the pipeline replaced (``flat_patch_depth.py``, ``mirror_border.py``, ``filter_passes.py``,
-``filter_detail.py``, ``filter_per_shape.py``, ``network_blend.py``, ``thin_routing.py``):
-each replaces its stage, then
-calls ``run_eval`` (``run_eval_with_prediction`` when the stage is the network's prediction,
+``filter_detail.py``, ``filter_per_shape.py``, ``flat_terraces.py``, ``network_blend.py``,
+``thin_routing.py``): each replaces its stage, then calls ``run_eval`` (``run_eval_cached``
+when the stage comes after the network and its predictions may be kept on disk,
+``run_eval_with_prediction`` when the stage is the network's prediction,
 ``run_eval_with_network`` for a second network beside AGNDC). ``high_margin.py`` replaces no
 stage: it sets the learned methods' ``high_margin`` in the registry, then calls ``run_eval``."""
 
 from __future__ import annotations
 
 import argparse
+import hashlib
+from pathlib import Path
 
 
 def eval_parser(doc: str, data_help: str = "folder of meshes (agndc val-data)",
@@ -64,3 +67,32 @@ def run_eval_with_network(args: argparse.Namespace, other: str, combine) -> None
         return combine(lattice, vertex, lambda: predict(other, lattice))
 
     run_eval_with_prediction(args, replace)
+
+
+def cached(cache: Path):
+    """A ``run_eval_with_prediction`` replacement that keeps each prediction on disk (keyed by
+    the lattice and the method: clear the folder when the weights change)."""
+    import numpy as np
+
+    cache.mkdir(parents=True, exist_ok=True)
+
+    def replace(method, lattice, predict):
+        key = hashlib.sha1(np.ascontiguousarray(lattice).tobytes()
+                           + str((method, lattice.shape)).encode()).hexdigest()
+        path = cache / f"{key}.npy"
+        if path.exists():
+            return np.load(path)
+        vertex = predict(method, lattice)
+        np.save(path, vertex)
+        return vertex
+
+    return replace
+
+
+def run_eval_cached(args: argparse.Namespace) -> None:
+    """``run_eval``, with the network's predictions kept in ``args.cache`` when it is set, so
+    that a study's variants rerun only the stages after the network."""
+    if args.cache is None:
+        run_eval(args)
+    else:
+        run_eval_with_prediction(args, cached(args.cache))
