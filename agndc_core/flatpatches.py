@@ -100,6 +100,15 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
     return out
 
 
+def patch_depths(patch_of: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """(count + 1,) float: the depth an outermost patch takes, the mean of its cells'
+    coordinates (``patch_of``: (S,) patch of each cell in 1..count; ``values``: (S,) their
+    coordinates). One function, so a study can try another statistic
+    (``research/flat_patch_depth.py --median``)."""
+    size = np.bincount(patch_of, minlength=count + 1)
+    return np.bincount(patch_of, weights=values, minlength=count + 1) / np.maximum(size, 1)
+
+
 def outer_cell_layers(lattice: np.ndarray, axis: int) -> dict[bool, int]:
     """{lower_inside: cell layer along ``axis``} of the shape's two outermost faces: the layer
     above the last occupied layer of points holds the faces whose lower corners are inside
@@ -134,8 +143,7 @@ def _flatten_slab(points, coord, lower_inside: bool, written: range, by_mean: np
     # from here on only the split cells (a few % of the volume) are touched
     cells = np.nonzero(split)
     patch_of = patches[cells]  # (S,) in 1..count
-    size = np.bincount(patch_of, minlength=count + 1)
-    mean = np.bincount(patch_of, weights=coord[cells], minlength=count + 1) / np.maximum(size, 1)
+    mean = patch_depths(patch_of, coord[cells], count)
     keep = ~terrace_patches(split, patches, count)[patch_of]
     keep &= (cells[2] >= written.start) & (cells[2] < written.stop)  # halo layers: not ours
     cells = tuple(c[keep] for c in cells)

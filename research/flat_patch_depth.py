@@ -11,20 +11,24 @@ rule replaced:
 
 and ``--thin N`` puts the outermost patches at the midpoint as well along an axis where the
 whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --sheets``),
-``--far N`` along an axis where it spans more than N voxels.
+``--far N`` along an axis where it spans more than N voxels. ``--median``: the outermost patches
+take the median of the network's coordinates instead of their mean (``flatpatches.patch_depths``).
 
     .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
     .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
     .venv/bin/python research/flat_patch_depth.py SHEETS --thin 3 --res 64 -o OUT
+    .venv/bin/python research/flat_patch_depth.py DATA --median --shifts 3 -o OUT --cache DIR
 
-docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint", "Thin sheets") has the
-numbers.
+docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint", "Tried and dropped",
+"Thin sheets") has the numbers.
 """
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
-from stage_eval import eval_parser, run_eval
+from stage_eval import eval_parser, run_eval_cached
 
 
 def main() -> None:
@@ -39,6 +43,10 @@ def main() -> None:
                         "whole shape is at most this many voxels thick, keep the network's "
                         "thickness between its two outermost flat faces but centre them on the "
                         "voxel slab (their common shift removed)")
+    parser.add_argument("--median", action="store_true", help="the median of the network's "
+                        "coordinates on the outermost patches instead of their mean")
+    parser.add_argument("--cache", type=Path, default=None,
+                        help="keep the network's predictions here (stage_eval.cached)")
     args = parser.parse_args()
 
     from agndc_core import flatpatches
@@ -86,7 +94,24 @@ def main() -> None:
             return out
 
         flatpatches.flatten_patches = centred
-    run_eval(args)
+    if args.median:
+        flatpatches.patch_depths = patch_medians
+    run_eval_cached(args)
+
+
+def patch_medians(patch_of: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
+    """``flatpatches.patch_depths`` with the median of each patch's coordinates (0 for an
+    index without cells)."""
+    order = np.lexsort((values, patch_of))  # by patch, then by value
+    size = np.bincount(patch_of, minlength=count + 1)
+    start = np.concatenate([[0], np.cumsum(size)[:-1]])
+    ordered = values[order]
+    median = np.zeros(count + 1)
+    has = size > 0
+    low = start[has] + (size[has] - 1) // 2
+    high = start[has] + size[has] // 2
+    median[has] = 0.5 * (ordered[low] + ordered[high])
+    return median
 
 
 if __name__ == "__main__":

@@ -260,3 +260,19 @@ def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
                                             max_std=0.08, min_cells=16, one_sided=True,
                                             enclosed=0.9)
     np.testing.assert_array_equal(enclosed, vertex)
+
+
+def test_patch_medians_are_each_patchs_median():
+    """flat_patch_depth --median: the vectorised per-patch median against np.median per patch;
+    an index without cells gets 0."""
+    import numpy as np
+
+    script = research_script("flat_patch_depth")
+    rng = np.random.default_rng(3)
+    patch_of = rng.integers(1, 7, 200)
+    patch_of[patch_of == 4] = 5  # patch 4 has no cells
+    values = rng.random(200)
+    median = script.patch_medians(patch_of, values, 6)
+    assert median.shape == (7,) and median[0] == 0 and median[4] == 0
+    for p in (1, 2, 3, 5, 6):
+        assert median[p] == np.median(values[patch_of == p])
