@@ -276,3 +276,19 @@ def test_patch_medians_are_each_patchs_median():
     assert median.shape == (7,) and median[0] == 0 and median[4] == 0
     for p in (1, 2, 3, 5, 6):
         assert median[p] == np.median(values[patch_of == p])
+
+
+def test_region_parts_of_a_partition_add_up_to_the_chamfer_distance():
+    """region_errors: each region takes the ground-truth samples in it and the output samples
+    whose nearest ground-truth sample is in it; over a partition the parts sum to the CD."""
+    import numpy as np
+
+    script = research_script("region_errors")
+    rng = np.random.default_rng(5)
+    d_gt, d_out = rng.random(50), rng.random(80)
+    nearest = rng.integers(0, 50, 80)
+    first = np.arange(50) < 20
+    parts = script.region_parts(d_gt, d_out, nearest, {"a": first, "b": ~first})
+    assert np.isclose(sum(parts.values()), np.mean(d_gt ** 2) + np.mean(d_out ** 2))
+    assert np.isclose(parts["a"], np.sum(d_gt[:20] ** 2) / 50
+                      + np.sum(d_out[nearest < 20] ** 2) / 80)
