@@ -260,16 +260,22 @@ def _pure_splits_last(points: np.ndarray, lower_inside: bool) -> np.ndarray:
 def terrace_patches(split: np.ndarray, patches: np.ndarray, count: int) -> np.ndarray:
     """(count + 1,) bool: the patches with a pure split of the same kind one layer up or down
     within ``tol.terrace_reach`` cells in the plane (index 0, no patch, is False)."""
-    near = ndimage.binary_dilation(split, _IN_PLANE, iterations=tol.terrace_reach)
-    # near[..., k] marks the reach of layer k's splits; a patch in layer k is a terrace when
-    # layer k - 1 or k + 1 reaches it
-    stepped = np.zeros_like(split)
-    stepped[..., 1:] |= near[..., :-1]
-    stepped[..., :-1] |= near[..., 1:]
+    below, above = step_reach(split)
     terrace = np.zeros(count + 1, dtype=bool)
-    terrace[patches[split & stepped]] = True
+    terrace[patches[split & (below | above)]] = True
     terrace[0] = False
     return terrace
+
+
+def step_reach(split: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(below, above), each bool of ``split``'s shape: the cells within ``tol.terrace_reach``
+    cells in the plane of a pure split one layer down (below) or one layer up (above)."""
+    near = ndimage.binary_dilation(split, _IN_PLANE, iterations=tol.terrace_reach)
+    # near[..., k] marks the reach of layer k's splits
+    below, above = np.zeros_like(split), np.zeros_like(split)
+    below[..., 1:] = near[..., :-1]
+    above[..., :-1] = near[..., 1:]
+    return below, above
 
 
 def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:

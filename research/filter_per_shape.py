@@ -45,13 +45,12 @@ def logged(filter_mesh, log: Path, params):
 
 
 def main() -> None:
-    parser = eval_parser(__doc__, methods=False)
+    parser = eval_parser(__doc__, methods=False, cache=True)
     parser.add_argument("--where", choices=("shipped", "always", "none"), default="shipped",
                         help="shipped: the pipeline's filter (wrinkled surfaces left alone); "
                         "always: the filter on every mesh; none: no filter")
     parser.add_argument("--log", type=Path, default=None, help="append, per filtered mesh: "
                         "vertices, and the shares on planar patches, at creases and on detail")
-    parser.add_argument("--cache", type=Path, default=None)
     args = parser.parse_args()
 
     import dataclasses

@@ -25,14 +25,12 @@ docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint", "Tr
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 from stage_eval import eval_parser, run_eval_cached
 
 
 def main() -> None:
-    parser = eval_parser(__doc__)
+    parser = eval_parser(__doc__, cache=True)
     parser.add_argument("--depth", default="shipped",
                         choices=["shipped", "mean", "midpoint", "outer-midpoint"])
     parser.add_argument("--thin", type=int, default=0, help="midpoint on the outermost layers "
@@ -45,8 +43,6 @@ def main() -> None:
                         "voxel slab (their common shift removed)")
     parser.add_argument("--median", action="store_true", help="the median of the network's "
                         "coordinates on the outermost patches instead of their mean")
-    parser.add_argument("--cache", type=Path, default=None,
-                        help="keep the network's predictions here (stage_eval.cached)")
     args = parser.parse_args()
 
     from agndc_core import flatpatches

@@ -32,7 +32,6 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
     from scipy import ndimage
 
     from agndc_core import flatpatches as fp
-    from agndc_core.tolerances import tol
 
     lattice = np.asarray(lattice, dtype=bool)
     for axis in range(3):
@@ -45,16 +44,14 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
             patches, count = ndimage.label(split, fp._IN_PLANE)
             if count == 0:
                 continue
-            terrace = fp.terrace_patches(split, patches, count)
-            # which side each patch's steps go to: a recess floor or a plateau steps one way
-            # only, the terraces of a slanted plane both ways
-            near = ndimage.binary_dilation(split, fp._IN_PLANE, iterations=tol.terrace_reach)
-            below, above = np.zeros_like(split), np.zeros_like(split)
-            below[..., 1:] = near[..., :-1]
-            above[..., :-1] = near[..., 1:]
+            # fp.terrace_patches, keeping which way each patch's steps go
+            below, above = fp.step_reach(split)
             steps_down = np.bincount(patches[split & below], minlength=count + 1) > 0
             steps_up = np.bincount(patches[split & above], minlength=count + 1) > 0
-            terrace &= ~(steps_down & steps_up) if one_sided else terrace
+            terrace = steps_down | steps_up
+            terrace[0] = False
+            if one_sided:  # a recess floor or a plateau steps one way, a slanted plane both
+                terrace &= ~(steps_down & steps_up)
             if enclosed > 0:  # the share of a patch's rim cells next to a step
                 inner = ndimage.binary_erosion(split, fp._IN_PLANE, border_value=0)
                 rim = split & ~inner
@@ -65,7 +62,7 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
             patch_of = patches[cells]
             values = coord[cells]
             size = np.bincount(patch_of, minlength=count + 1)
-            mean = np.bincount(patch_of, values, count + 1) / np.maximum(size, 1)
+            mean = fp.patch_depths(patch_of, values, count)
             square = np.bincount(patch_of, values ** 2, count + 1) / np.maximum(size, 1)
             std = np.sqrt(np.maximum(square - mean ** 2, 0.0))
             taken = np.bincount(patch_of, pin[cells], count + 1) > 0
@@ -84,7 +81,7 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
 
 
 def main() -> None:
-    parser = eval_parser(__doc__, methods=False)
+    parser = eval_parser(__doc__, methods=False, cache=True)
     parser.add_argument("--max-std", type=float, default=0.08)
     parser.add_argument("--min-cells", type=int, default=16)
     parser.add_argument("--log", type=Path, default=None,
@@ -94,7 +91,6 @@ def main() -> None:
     parser.add_argument("--enclosed", type=float, default=0.0,
                         help="only terraces with at least this share of their rim cells next "
                         "to a step (a floor or plateau the step surrounds)")
-    parser.add_argument("--cache", type=Path, default=None)
     args = parser.parse_args()
 
     from agndc_core import flatpatches

@@ -93,7 +93,8 @@ def main() -> None:
                              source="region_errors", shift=shift, source_bounds=False)
         out, _ = sample_surface((result.vertices - centre) / scale, result.faces, args.samples,
                                 np.random.default_rng(1))
-        d_gt, _ = cKDTree(out).query(gt)
+        out_tree = cKDTree(out)
+        d_gt, _ = out_tree.query(gt)
         d_out, nearest = cKDTree(gt).query(out)
         line = f"{method:14s} CD {1e5 * (np.mean(d_gt ** 2) + np.mean(d_out ** 2)):.3f} |"
         for split in splits:
@@ -102,9 +103,8 @@ def main() -> None:
             line += " |"
         print(line)
         if args.planes:
-            tree = cKDTree(out)
             for level, up, mask in planes:
-                offset = (out[tree.query(gt[mask])[1], axis] - gt[mask, axis]) / voxel
+                offset = (out[out_tree.query(gt[mask])[1], axis] - gt[mask, axis]) / voxel
                 print(f"    {'up' if up else 'down'}-facing plane at {level:+.2f} voxels "
                       f"({mask.sum()} samples): median offset {np.median(offset):+.3f}")
 

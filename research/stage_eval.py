@@ -15,9 +15,10 @@ from pathlib import Path
 
 
 def eval_parser(doc: str, data_help: str = "folder of meshes (agndc val-data)",
-                methods: bool = True) -> argparse.ArgumentParser:
-    """A parser with the data folder, -o, --res, --samples, --shifts and (if ``methods``)
-    --methods; a study adds its own options."""
+                methods: bool = True, cache: bool = False) -> argparse.ArgumentParser:
+    """A parser with the data folder, -o, --res, --samples, --shifts, (if ``methods``)
+    --methods and (if ``cache``) --cache for ``run_eval_cached``; a study adds its own
+    options."""
     parser = argparse.ArgumentParser(description=doc.split("\n")[0])
     parser.add_argument("data", help=data_help)
     parser.add_argument("-o", "--out", required=True)
@@ -26,6 +27,9 @@ def eval_parser(doc: str, data_help: str = "folder of meshes (agndc val-data)",
     parser.add_argument("--res", type=int, default=64)
     parser.add_argument("--samples", type=int, default=30_000)
     parser.add_argument("--shifts", type=int, default=0)
+    if cache:
+        parser.add_argument("--cache", type=Path, default=None,
+                            help="keep the network's predictions in this folder")
     return parser
 
 
