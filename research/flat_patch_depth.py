@@ -41,6 +41,9 @@ def main() -> None:
                         "whole shape is at most this many voxels thick, keep the network's "
                         "thickness between its two outermost flat faces but centre them on the "
                         "voxel slab (their common shift removed)")
+    parser.add_argument("--longest", action="store_true", help="the midpoint on the "
+                        "outermost layers too along the axis the shape spans strictly the most "
+                        "layers of (the voxeliser puts a mesh's bounding faces mid-layer there)")
     parser.add_argument("--median", action="store_true", help="the median of the network's "
                         "coordinates on the outermost patches instead of their mean")
     args = parser.parse_args()
@@ -53,6 +56,11 @@ def main() -> None:
         layers = shipped(lattice, axis)
         outer = flatpatches.outer_cell_layers(lattice, axis)
         span = outer[True] - outer[False]  # the layers of points the shape spans
+        if args.longest:
+            spans = [flatpatches.outer_cell_layers(lattice, a) for a in range(3)]
+            spans = [o[True] - o[False] for o in spans]
+            if all(span > other for a, other in enumerate(spans) if a != axis):
+                return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if span <= args.thin or 0 < args.far < span:
             return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":

@@ -292,3 +292,37 @@ def test_region_parts_of_a_partition_add_up_to_the_chamfer_distance():
     assert np.isclose(sum(parts.values()), np.mean(d_gt ** 2) + np.mean(d_out ** 2))
     assert np.isclose(parts["a"], np.sum(d_gt[:20] ** 2) / 50
                       + np.sum(d_out[nearest < 20] ** 2) / 80)
+
+
+def test_crease_cells_of_a_box_take_both_patches_depths():
+    """crease_cells: the cell on a box's edge takes the depth of each face's flattened patch
+    along that face's axis; --min-axes 3 takes no edge cell, and a sphere's rims take none
+    with --min-axes 2."""
+    import numpy as np
+
+    from agndc_core.flatpatches import flatten_patches
+
+    script = research_script("crease_cells")
+    lattice = np.zeros((20, 20, 20), dtype=bool)
+    lattice[5:15, 5:13, 5:11] = True
+    noisy = 0.5 + 0.1 * np.random.default_rng(0).standard_normal(lattice.shape + (3,))
+    for min_axes, expected in ((1, True), (2, True), (3, False)):
+        pinned = np.zeros(noisy.shape, dtype=bool)
+        vertex = flatten_patches(lattice, noisy.copy(), pinned=pinned)
+        flat = pinned.copy()
+        written = script.carry_to_creases(lattice, vertex, pinned, flat, min_axes=min_axes)
+        assert (written > 0) == expected
+        # the edge x = 14.x, y = 12.x: x from the +x face's patch (cell (14, 8, 6)), y from
+        # the +y face's (cell (10, 12, 6)); z, along the edge, keeps the network's
+        edge = vertex[14, 12, 6]
+        if expected:
+            assert edge[0] == vertex[14, 8, 6, 0] and edge[1] == vertex[10, 12, 6, 1]
+            assert pinned[14, 12, 6, :2].all() and not pinned[14, 12, 6, 2]
+        else:
+            assert np.array_equal(edge, noisy[14, 12, 6])
+        assert np.array_equal(vertex[~pinned], noisy[~pinned])  # nothing else moves
+    grid = np.indices((24, 24, 24)) - 11.5
+    ball = (grid ** 2).sum(axis=0) < 8.2 ** 2
+    pinned = np.zeros(ball.shape + (3,), dtype=bool)
+    vertex = flatten_patches(ball, np.full(ball.shape + (3,), 0.5), pinned=pinned)
+    assert script.carry_to_creases(ball, vertex, pinned, pinned.copy(), min_axes=2) == 0

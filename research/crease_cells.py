@@ -1,0 +1,118 @@
+"""The cells along a flat patch's rim: the patch's depth carried one cell past its edge.
+
+``flatpatches.flatten_patches`` gives every cell of a flat voxel-face patch one coordinate
+along the patch's axis; the cells just past the patch's rim, where the face meets another
+surface at a crease, keep the network's coordinate. Where such a cell's corners say the same
+face goes on into it (each of its 4 corner columns along the axis is split the patch's way,
+all inside or all outside, at least one split and none reversed: a convex or a concave crease
+of the face), the face's plane crosses that cell too, and a sharp crease's dual vertex lies on
+it. This study gives those cells the mean depth of their pinned in-plane neighbours and pins
+it, then scores ``agndc eval``:
+
+    .venv/bin/python research/crease_cells.py DATA -o OUT --cache DIR [--shifts 3]
+
+``--rings N`` carries the depth N cells past the rim (each ring from the one before);
+``--min-axes 2`` only to the cells on an edge between flat patches of two axes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from stage_eval import eval_parser, run_eval_cached
+
+
+def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray,
+                     flat: np.ndarray, rings: int = 1, min_axes: int = 1) -> int:
+    """Give the crease cells next to the flattened patches their patch's depth, in place.
+
+    lattice: (X, Y, Z) bool; vertex: (X, Y, Z, 3) float offsets; pinned: (X, Y, Z, 3) bool,
+    set where a coordinate is written; flat: (X, Y, Z, 3) bool, the coordinates
+    ``flatten_patches`` wrote (the patches the depth is carried from); min_axes: a cell takes
+    the depths only when it is a crease cell of patches along at least this many axes (2: an
+    edge between two flat faces). Returns the number of coordinates written."""
+    from agndc_core.flatpatches import _pure_splits_last
+
+    take_all = np.zeros(vertex.shape, dtype=bool)
+    value_all = np.zeros(vertex.shape)
+    for axis in range(3):
+        points = np.moveaxis(lattice, axis, -1)
+        coord = np.moveaxis(vertex[..., axis], axis, -1)[:-1, :-1, :-1].copy()
+        pin = np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1].copy()
+        took = np.moveaxis(take_all[..., axis], axis, -1)[:-1, :-1, :-1]
+        value = np.moveaxis(value_all[..., axis], axis, -1)[:-1, :-1, :-1]
+        source = np.moveaxis(flat[..., axis], axis, -1)[:-1, :-1, :-1].copy()
+        lower, upper = points[..., :-1], points[..., 1:]
+        for lower_inside in (True, False):
+            split_col = lower & ~upper if lower_inside else ~lower & upper
+            reversed_col = ~lower & upper if lower_inside else lower & ~upper
+            corners = [(slice(None, -1), slice(None, -1)), (slice(1, None), slice(None, -1)),
+                       (slice(None, -1), slice(1, None)), (slice(1, None), slice(1, None))]
+            any_split = np.zeros(coord.shape, dtype=bool)
+            all_split = np.ones(coord.shape, dtype=bool)
+            any_reversed = np.zeros(coord.shape, dtype=bool)
+            for a, b in corners:
+                any_split |= split_col[a, b]
+                all_split &= split_col[a, b]
+                any_reversed |= reversed_col[a, b]
+            crease = any_split & ~all_split & ~any_reversed
+            have = source & _pure_splits_last(points, lower_inside)
+            for _ in range(rings):
+                total = np.zeros(coord.shape)
+                count = np.zeros(coord.shape)
+                for shift in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                    rolled_have = _shifted(have, shift)
+                    total += np.where(rolled_have, _shifted(coord, shift), 0.0)
+                    count += rolled_have
+                take = crease & (count > 0) & ~pin
+                coord[take] = total[take] / count[take]
+                pin[take] = True
+                took[take] = True
+                value[take] = coord[take]
+                have = have | take
+    take_all &= (take_all.sum(axis=-1) >= min_axes)[..., None]
+    vertex[take_all] = value_all[take_all]
+    pinned |= take_all
+    return int(take_all.sum())
+
+
+def _shifted(values: np.ndarray, shift) -> np.ndarray:
+    """values moved by ``shift`` cells along the first two axes, zero (False) where nothing
+    comes in: out[i, j] = values[i - di, j - dj]."""
+    out = np.zeros_like(values)
+    di, dj = shift
+    src = [slice(None)] * 2
+    dst = [slice(None)] * 2
+    for k, d in enumerate((di, dj)):
+        if d > 0:
+            src[k], dst[k] = slice(None, -d), slice(d, None)
+        elif d < 0:
+            src[k], dst[k] = slice(-d, None), slice(None, d)
+    out[tuple(dst)] = values[tuple(src)]
+    return out
+
+
+def main() -> None:
+    parser = eval_parser(__doc__, cache=True)
+    parser.add_argument("--rings", type=int, default=1)
+    parser.add_argument("--min-axes", type=int, default=1, help="2: only cells on an edge "
+                        "between flat patches of two axes")
+    args = parser.parse_args()
+
+    from agndc_core import flatpatches
+
+    flatten = flatpatches.flatten_patches
+
+    def with_creases(lattice, vertex, *, in_place=False, pinned=None):
+        mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
+        before = mine.copy()
+        out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+        carry_to_creases(np.asarray(lattice, dtype=bool), out, mine, mine & ~before,
+                         args.rings, args.min_axes)
+        return out
+
+    flatpatches.flatten_patches = with_creases  # the pipeline looks it up at each call
+    run_eval_cached(args)
+
+
+if __name__ == "__main__":
+    main()
