@@ -9,6 +9,10 @@ cell of such a patch one coordinate along the axis, so the face is exactly flat:
 - on the shape's **outermost layer** along the axis (a face that bounds the shape), the mean of
   the network's coordinates: the voxeliser frames a mesh's bounding box, so where those faces
   lie in their layer follows from the frame, and the network has learned it;
+- on the outermost layers along the axis the shape spans **strictly the most layers** of
+  (``longest_axis``), the layer's midpoint: ``voxelize`` puts the bounding faces of a mesh's
+  longest side exactly mid-layer, which the network's mean only approximates (and a voxel
+  model's faces lie there on every axis);
 - **inside the shape's extent**, the layer's midpoint: where such a face lies in its layer is
   uniform over the layer for all the grid can tell, the midpoint is the best guess under that,
   and the network's mean was measured farther off (docs/experiments/flat-patches.md).
@@ -76,7 +80,8 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
     Returns:
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
         share one coordinate along the patch's axis: the mean of theirs on the layers
-        ``mean_depth_layers`` names (the shape's outermost), ``MIDPOINT`` elsewhere; nothing
+        ``mean_depth_layers`` names (the shape's outermost but along its longest side),
+        ``MIDPOINT`` elsewhere; nothing
         else changes.
     """
     lattice = np.asarray(lattice, dtype=bool)
@@ -120,11 +125,26 @@ def outer_cell_layers(lattice: np.ndarray, axis: int) -> dict[bool, int]:
     return {True: int(occupied[-1]), False: int(occupied[0]) - 1}
 
 
+def longest_axis(lattice: np.ndarray) -> int | None:
+    """The axis along which the occupied points span strictly more layers than along the two
+    others (a mesh's longest side, where ``voxelize`` puts the bounding faces mid-layer);
+    None for a tie or an empty lattice."""
+    spans = [layers[True] - layers[False]
+             for layers in (outer_cell_layers(lattice, axis) for axis in range(3))]
+    longest = int(np.argmax(spans))
+    if spans[longest] <= 0 or sorted(spans)[1] == spans[longest]:
+        return None
+    return longest
+
+
 def mean_depth_layers(lattice: np.ndarray, axis: int) -> dict[bool, np.ndarray]:
     """{lower_inside: (cell layers along ``axis``,) bool}: the layers whose flat patches of
     that kind take the network's mean depth, the shape's outermost one on each side
-    (``outer_cell_layers``); the patches of every other layer go to ``MIDPOINT``."""
+    (``outer_cell_layers``) unless ``axis`` is the ``longest_axis``; the patches of every
+    other layer go to ``MIDPOINT``."""
     layers = np.arange(lattice.shape[axis] - 1)
+    if axis == longest_axis(lattice):
+        return {kind: np.zeros(len(layers), dtype=bool) for kind in KINDS}
     return {kind: layers == layer for kind, layer in outer_cell_layers(lattice, axis).items()}
 
 
@@ -282,10 +302,14 @@ def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray
     """Cell-by-cell reference of ``flatten_patches`` (slow): a flood fill per patch."""
     lattice = np.asarray(lattice, dtype=bool)
     out = np.array(vertex, dtype=np.float64, copy=True)
+    occupied = [[k for k in range(lattice.shape[axis]) if np.take(lattice, k, axis=axis).any()]
+                for axis in range(3)]
+    spans = [layers[-1] - layers[0] if layers else 0 for layers in occupied]
     for axis, lower_inside in itertools.product(range(3), KINDS):
-        occupied = [k for k in range(lattice.shape[axis])
-                    if np.take(lattice, k, axis=axis).any()]
-        outer = (occupied[-1] if lower_inside else occupied[0] - 1) if occupied else -1
+        layers = occupied[axis]
+        outer = (layers[-1] if lower_inside else layers[0] - 1) if layers else -1
+        if all(spans[axis] > spans[other] for other in range(3) if other != axis):
+            outer = -1  # the longest side's bounding faces: mid-layer like the inner ones
         for patch in _patches_naive(lattice, axis, lower_inside):
             if patch[0][axis] == outer:  # a face that bounds the shape
                 value = np.mean([vertex[cell][axis] for cell in patch])

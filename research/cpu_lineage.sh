@@ -16,10 +16,11 @@
 # 0.995) with a new seed, a checkpoint at 400 and 800: how far a continuation of the recipe
 # moves the validation score (it wanders about the shipped weights, docs/experiments/
 # sheet-training.md). Stage 11: the same, with 900 new training shapes (DATA_fresh, seeds from
-# 40,000) in place of DATA: whether new shapes move what the same shapes did not. A stage is
-# kept short (about 80 min where a
-# step takes ~6 s), since only its run folder carries its state: a new machine starts the stage
-# again.
+# 40,000) in place of DATA: whether new shapes move what the same shapes did not (they did
+# not). Stage 12: the shipped weights on all 2,000 shapes (DATA, DATA_fresh, the sheets) at
+# a lower learning rate (3e-5), 1,200 steps, a checkpoint every 400. A stage is kept short
+# (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
+# machine starts the stage again.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -88,6 +89,9 @@ current)
     stage fresh_agndc16 --data "$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    stage all_agndc16 --data "$data,$fresh,$sheets" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \

@@ -22,14 +22,18 @@ from stage_eval import eval_parser, run_eval_cached
 
 
 def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray,
-                     flat: np.ndarray, rings: int = 1, min_axes: int = 1) -> int:
+                     flat: np.ndarray, rings: int = 1, min_axes: int = 1,
+                     moved: np.ndarray | None = None) -> int:
     """Give the crease cells next to the flattened patches their patch's depth, in place.
 
     lattice: (X, Y, Z) bool; vertex: (X, Y, Z, 3) float offsets; pinned: (X, Y, Z, 3) bool,
     set where a coordinate is written; flat: (X, Y, Z, 3) bool, the coordinates
     ``flatten_patches`` wrote (the patches the depth is carried from); min_axes: a cell takes
     the depths only when it is a crease cell of patches along at least this many axes (2: an
-    edge between two flat faces). Returns the number of coordinates written."""
+    edge between two flat faces); moved: None, or (X, Y, Z, 3) float, how far the stage moved
+    each coordinate it wrote (its depth less the network's): a crease cell is then moved by
+    its neighbours' mean move instead of taking their depth, and is not pinned (the rim
+    follows its face). Returns the number of coordinates written."""
     from agndc_core.flatpatches import _pure_splits_last
 
     take_all = np.zeros(vertex.shape, dtype=bool)
@@ -41,6 +45,8 @@ def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray
         took = np.moveaxis(take_all[..., axis], axis, -1)[:-1, :-1, :-1]
         value = np.moveaxis(value_all[..., axis], axis, -1)[:-1, :-1, :-1]
         source = np.moveaxis(flat[..., axis], axis, -1)[:-1, :-1, :-1].copy()
+        carried = coord if moved is None else \
+            np.moveaxis(moved[..., axis], axis, -1)[:-1, :-1, :-1].copy()
         lower, upper = points[..., :-1], points[..., 1:]
         for lower_inside in (True, False):
             split_col = lower & ~upper if lower_inside else ~lower & upper
@@ -61,18 +67,45 @@ def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray
                 count = np.zeros(coord.shape)
                 for shift in ((1, 0), (-1, 0), (0, 1), (0, -1)):
                     rolled_have = _shifted(have, shift)
-                    total += np.where(rolled_have, _shifted(coord, shift), 0.0)
+                    total += np.where(rolled_have, _shifted(carried, shift), 0.0)
                     count += rolled_have
                 take = crease & (count > 0) & ~pin
-                coord[take] = total[take] / count[take]
+                if moved is None:
+                    coord[take] = total[take] / count[take]
+                else:
+                    carried[take] = total[take] / count[take]
+                    coord[take] = np.clip(coord[take] + carried[take], 0.0, 1.0)
                 pin[take] = True
                 took[take] = True
                 value[take] = coord[take]
                 have = have | take
     take_all &= (take_all.sum(axis=-1) >= min_axes)[..., None]
     vertex[take_all] = value_all[take_all]
-    pinned |= take_all
+    if moved is None:
+        pinned |= take_all
     return int(take_all.sum())
+
+
+def patch_mean_moves(lattice: np.ndarray, moved: np.ndarray, flat: np.ndarray) -> np.ndarray:
+    """``moved`` with each flattened patch's cells given their patch's mean move."""
+    from scipy import ndimage
+
+    from agndc_core.flatpatches import _IN_PLANE, _pure_splits_last
+
+    out = np.array(moved, copy=True)
+    for axis in range(3):
+        points = np.moveaxis(lattice, axis, -1)
+        view = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
+        source = np.moveaxis(flat[..., axis], axis, -1)[:-1, :-1, :-1]
+        for lower_inside in (True, False):
+            cells = source & _pure_splits_last(points, lower_inside)
+            patches, count = ndimage.label(cells, _IN_PLANE)
+            if count == 0:
+                continue
+            size = np.bincount(patches[cells], minlength=count + 1)
+            total = np.bincount(patches[cells], weights=view[cells], minlength=count + 1)
+            view[cells] = (total / np.maximum(size, 1))[patches[cells]]
+    return out
 
 
 def _shifted(values: np.ndarray, shift) -> np.ndarray:
@@ -96,6 +129,11 @@ def main() -> None:
     parser.add_argument("--rings", type=int, default=1)
     parser.add_argument("--min-axes", type=int, default=1, help="2: only cells on an edge "
                         "between flat patches of two axes")
+    parser.add_argument("--follow", action="store_true", help="move the crease cells as far "
+                        "as their patch moved, instead of giving them its depth")
+    parser.add_argument("--patch-move", action="store_true", help="with --follow: each "
+                        "crease cell moves as far as its patches' mean moved, not its "
+                        "neighbours")
     args = parser.parse_args()
 
     from agndc_core import flatpatches
@@ -105,9 +143,14 @@ def main() -> None:
     def with_creases(lattice, vertex, *, in_place=False, pinned=None):
         mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
         before = mine.copy()
+        network = np.array(vertex, copy=True)
         out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
-        carry_to_creases(np.asarray(lattice, dtype=bool), out, mine, mine & ~before,
-                         args.rings, args.min_axes)
+        flat = mine & ~before
+        moved = out - network
+        if args.patch_move:
+            moved = patch_mean_moves(np.asarray(lattice, dtype=bool), moved, flat)
+        carry_to_creases(np.asarray(lattice, dtype=bool), out, mine, flat,
+                         args.rings, args.min_axes, moved if args.follow else None)
         return out
 
     flatpatches.flatten_patches = with_creases  # the pipeline looks it up at each call

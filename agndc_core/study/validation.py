@@ -23,7 +23,8 @@ pockets (gaskets, laser-cut and sheet-metal parts, plates lying on a print bed).
 training generator and the family above reject a shape whose shortest side is under 5 % of its
 longest (3.1 voxels at 64^3), so a whole shape this thin is new to the networks; the two faces
 that bound it lie in the shape's outermost layers of cells, where the flat-patch stage reads
-their depth from the network (``flatpatches.py``).
+their depth from the network (``flatpatches.py``; along a plate's longest side, where the
+voxeliser puts them mid-layer, they go there).
 
 ``validation_shape(seed)`` returns the class, the builder's name and a normalised closed mesh
 (bounding-box centre at the origin, longest side 1), deterministic in the seed. ``write_family``

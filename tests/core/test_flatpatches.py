@@ -92,6 +92,29 @@ def test_box_faces_become_flat_at_their_mean_depth():
                                 for axis in range(3))
 
 
+def test_the_longest_sides_bounding_faces_go_mid_layer():
+    # x spans 11 layers of points, y 8, z 6: voxelize puts a mesh's bounding faces mid-layer
+    # along its longest side, so the +-x faces take MIDPOINT; y and z keep the network's mean
+    lattice = block_lattice(shape=(18, 14, 12), lo=(3, 4, 5), hi=(14, 12, 11))
+    assert flatpatches.longest_axis(lattice) == 0
+    vertex = noisy_vertex(lattice)
+    out = flatten_patches(lattice, vertex)
+    # each face's whole patch: the cells whose 4 corners along the other axes are in the block
+    assert np.all(out[2, 4:11, 5:10, 0] == flatpatches.MIDPOINT)
+    assert np.all(out[13, 4:11, 5:10, 0] == flatpatches.MIDPOINT)
+    for index in ((slice(3, 13), 3, slice(5, 10), 1), (slice(3, 13), slice(4, 11), 10, 2)):
+        assert np.ptp(out[index]) == 0.0
+        assert out[index].flat[0] == pytest.approx(vertex[index].mean(), abs=1e-6)
+    np.testing.assert_allclose(out, flatten_patches_naive(lattice, vertex), atol=1e-6)
+    # a tie for the longest side: every bounding face keeps the network's mean
+    tie = block_lattice(shape=(18, 18, 12), lo=(3, 3, 5), hi=(14, 14, 11))
+    assert flatpatches.longest_axis(tie) is None
+    vertex = noisy_vertex(tie)
+    out = flatten_patches(tie, vertex)
+    assert out[2, 3, 5, 0] == pytest.approx(vertex[2, 3:13, 5:10, 0].mean(), abs=1e-6)
+    assert flatpatches.longest_axis(np.zeros((4, 4, 4), dtype=bool)) is None
+
+
 def test_terraces_are_left_alone():
     # a plane slanted by one layer every 4 cells: every flat patch has a neighbour one layer
     # up or down within reach
