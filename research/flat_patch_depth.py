@@ -4,7 +4,8 @@
 depth; the others go to the middle of their layer. This study scores ``agndc eval`` with that
 rule replaced:
 
-* ``shipped``: the mean on the shape's outermost layer on each side, the midpoint inside;
+* ``shipped``: the mean on the shape's outermost layer on each side (but along its longest
+  side), the midpoint inside;
 * ``mean``: the mean everywhere (the stage before the rule);
 * ``midpoint``: the midpoint everywhere;
 * ``outer-midpoint``: the reverse of the shipped rule;
@@ -13,6 +14,8 @@ and ``--thin N`` puts the outermost patches at the midpoint as well along an axi
 whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --sheets``),
 ``--far N`` along an axis where it spans more than N voxels. ``--median``: the outermost patches
 take the median of the network's coordinates instead of their mean (``flatpatches.patch_depths``).
+``--longest-mean``: the outermost patches of the shape's longest side keep the network's mean
+too (the rule before ``flatpatches.longest_axis``).
 
     .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
     .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
@@ -41,9 +44,9 @@ def main() -> None:
                         "whole shape is at most this many voxels thick, keep the network's "
                         "thickness between its two outermost flat faces but centre them on the "
                         "voxel slab (their common shift removed)")
-    parser.add_argument("--longest", action="store_true", help="the midpoint on the "
-                        "outermost layers too along the axis the shape spans strictly the most "
-                        "layers of (the voxeliser puts a mesh's bounding faces mid-layer there)")
+    parser.add_argument("--longest-mean", action="store_true", help="the network's mean on "
+                        "the outermost layers of the shape's longest side too, instead of the "
+                        "midpoint (flatpatches.longest_axis)")
     parser.add_argument("--median", action="store_true", help="the median of the network's "
                         "coordinates on the outermost patches instead of their mean")
     args = parser.parse_args()
@@ -56,11 +59,6 @@ def main() -> None:
         layers = shipped(lattice, axis)
         outer = flatpatches.outer_cell_layers(lattice, axis)
         span = outer[True] - outer[False]  # the layers of points the shape spans
-        if args.longest:
-            spans = [flatpatches.outer_cell_layers(lattice, a) for a in range(3)]
-            spans = [o[True] - o[False] for o in spans]
-            if all(span > other for a, other in enumerate(spans) if a != axis):
-                return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if span <= args.thin or 0 < args.far < span:
             return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":
@@ -72,6 +70,8 @@ def main() -> None:
         return layers
 
     flatpatches.mean_depth_layers = replaced  # flatten_patches looks it up on every call
+    if args.longest_mean:
+        flatpatches.longest_axis = lambda lattice: None  # no longest side: the mean on all
     if args.symmetric_thin:
         flatten = flatpatches.flatten_patches
 
