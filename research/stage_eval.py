@@ -1,9 +1,9 @@
 """The arguments and the run shared by the studies that score ``agndc eval`` with one stage of
 the pipeline replaced (``flat_patch_depth.py``, ``mirror_border.py``, ``filter_passes.py``,
 ``filter_detail.py``, ``filter_per_shape.py``, ``flat_terraces.py``, ``crease_cells.py``,
-``network_blend.py``, ``thin_routing.py``): each replaces its stage, then calls ``run_eval`` (``run_eval_cached``
-when the stage comes after the network and its predictions may be kept on disk,
-``run_eval_with_prediction`` when the stage is the network's prediction,
+``network_blend.py``, ``thin_routing.py``): each replaces its stage, then calls ``run_eval``
+(``run_eval_cached`` when the stage comes after the network and its predictions may be kept on
+disk, ``run_eval_with_prediction`` when the stage is the network's prediction,
 ``run_eval_with_network`` for a second network beside AGNDC). ``high_margin.py`` replaces no
 stage: it sets the learned methods' ``high_margin`` in the registry, then calls ``run_eval``."""
 
