@@ -81,8 +81,7 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
         (X, Y, Z, 3) float, ``vertex`` (or a copy) where the cells of every flattened patch
         share one coordinate along the patch's axis: the mean of theirs on the layers
         ``mean_depth_layers`` names (the shape's outermost but along its longest side),
-        ``MIDPOINT`` elsewhere; nothing
-        else changes.
+        ``MIDPOINT`` elsewhere; nothing else changes.
     """
     lattice = np.asarray(lattice, dtype=bool)
     out = vertex if in_place else np.array(vertex, copy=True)

@@ -20,7 +20,13 @@ import argparse
 from pathlib import Path
 
 from agndc_core.study.evaluate import find_meshes
-from agndc_core.study.report import FIGURE_COLUMNS, FIGURE_SHAPES, figure_caption, render_figure
+from agndc_core.study.report import (
+    FIGURE_COLOURS,
+    FIGURE_COLUMNS,
+    FIGURE_SHAPES,
+    figure_caption,
+    render_figure,
+)
 
 
 def main() -> None:
@@ -42,9 +48,8 @@ def main() -> None:
         from agndc_core.methods import title
 
         columns = tuple((title(m), m, {}) for m in args.methods.split(",")) + FIGURE_COLUMNS[-1:]
-    # 48 colours: the grey-blue renders lose nothing visible and shrink ~5x
     if not render_figure(find_meshes(args.folder), names, args.out, resolution=args.res,
-                         columns=columns, colours=48):
+                         columns=columns, colours=FIGURE_COLOURS):
         raise SystemExit(f"none of {names} in {args.folder}")
     print(f"written: {args.out}")
     if not args.methods:

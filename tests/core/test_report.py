@@ -26,6 +26,7 @@ from agndc_core.study.evaluate import (
     write_report,
 )
 from agndc_core.study.report import (
+    FIGURE_COLOURS,
     FIGURE_SHAPES,
     REPORT_METHODS,
     SYNTHETIC_SHAPES,
@@ -186,7 +187,12 @@ def test_report_on_a_small_folder(tmp_path):
     assert lines["w/o nothing"] == lines["agndc"]
     assert (out.parent / "results_rows" / "w_o_nothing.md").is_file()
     assert (out.parent / "results_rows" / "rows.csv").is_file()
-    assert (out.parent / "results_shapes.png").stat().st_size > 10_000
+    picture = out.parent / "results_shapes.png"
+    assert picture.stat().st_size > 10_000
+    from PIL import Image
+
+    with Image.open(picture) as image:  # a palette PNG, a fifth of the bytes of full colour
+        assert image.mode == "P" and len(image.getpalette()) <= 3 * FIGURE_COLOURS
     # the shifted grids: the grid-alone methods only, both shifts, their own rows
     shifted = text.split("## 20³ on 2 shifted grids per mesh")[1].split("\n## ")[0]
     assert "| agndc | 2 |" in shifted and "| oracle | 2 |" in shifted
