@@ -15,7 +15,8 @@ whole shape is at most N voxels thick (thin sheets come from ``agndc val-data --
 ``--far N`` along an axis where it spans more than N voxels. ``--median``: the outermost patches
 take the median of the network's coordinates instead of their mean (``flatpatches.patch_depths``).
 ``--longest-mean``: the outermost patches of the shape's longest side keep the network's mean
-too (the rule before ``flatpatches.longest_axis``).
+too (the rule before ``flatpatches.longest_axis``); ``--longest-bounds``: no vertex of those
+layers beyond mid-layer either (``snap_to_bounds`` with planes there).
 
     .venv/bin/python research/flat_patch_depth.py DATA --depth mean --res 64 -o OUT
     .venv/bin/python research/flat_patch_depth.py DATA --depth midpoint --shifts 3 -o OUT
@@ -47,6 +48,9 @@ def main() -> None:
     parser.add_argument("--longest-mean", action="store_true", help="the network's mean on "
                         "the outermost layers of the shape's longest side too, instead of the "
                         "midpoint (flatpatches.longest_axis)")
+    parser.add_argument("--longest-bounds", action="store_true", help="also keep every vertex "
+                        "of the longest side's outermost layers from beyond mid-layer, as "
+                        "snap_to_bounds does with a mesh's bounding box")
     parser.add_argument("--median", action="store_true", help="the median of the network's "
                         "coordinates on the outermost patches instead of their mean")
     args = parser.parse_args()
@@ -100,7 +104,28 @@ def main() -> None:
         flatpatches.flatten_patches = centred
     if args.median:
         flatpatches.patch_depths = patch_medians
+    if args.longest_bounds:
+        flatpatches.flatten_patches = within_longest_bounds(flatpatches.flatten_patches)
     run_eval_cached(args)
+
+
+def within_longest_bounds(flatten):
+    """``flatten`` followed by ``flatpatches.snap_to_bounds`` with bounding planes mid-layer
+    in the longest side's two outermost layers and none on the other axes."""
+    from agndc_core import flatpatches
+
+    def flatten_and_snap(lattice, vertex, *, in_place=False, pinned=None):
+        out = flatten(lattice, vertex, in_place=in_place, pinned=pinned)
+        lattice = np.asarray(lattice, dtype=bool)
+        axis = flatpatches.longest_axis(lattice)
+        if axis is None:
+            return out
+        outer = flatpatches.outer_cell_layers(lattice, axis)
+        bounds = np.array([[-np.inf] * 3, [np.inf] * 3])
+        bounds[:, axis] = outer[False] + flatpatches.MIDPOINT, outer[True] + flatpatches.MIDPOINT
+        return flatpatches.snap_to_bounds(lattice, out, bounds, in_place=True, pinned=pinned)
+
+    return flatten_and_snap
 
 
 def patch_medians(patch_of: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
