@@ -54,14 +54,13 @@ def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray
             corners = [(slice(None, -1), slice(None, -1)), (slice(1, None), slice(None, -1)),
                        (slice(None, -1), slice(1, None)), (slice(1, None), slice(1, None))]
             any_split = np.zeros(coord.shape, dtype=bool)
-            all_split = np.ones(coord.shape, dtype=bool)
             any_reversed = np.zeros(coord.shape, dtype=bool)
             for a, b in corners:
                 any_split |= split_col[a, b]
-                all_split &= split_col[a, b]
                 any_reversed |= reversed_col[a, b]
+            all_split = _pure_splits_last(points, lower_inside)  # the patches' own cells
             crease = any_split & ~all_split & ~any_reversed
-            have = source & _pure_splits_last(points, lower_inside)
+            have = source & all_split
             for _ in range(rings):
                 total = np.zeros(coord.shape)
                 count = np.zeros(coord.shape)
@@ -145,12 +144,13 @@ def main() -> None:
         before = mine.copy()
         network = np.array(vertex, copy=True)
         out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+        lattice = np.asarray(lattice, dtype=bool)
         flat = mine & ~before
         moved = out - network
         if args.patch_move:
-            moved = patch_mean_moves(np.asarray(lattice, dtype=bool), moved, flat)
-        carry_to_creases(np.asarray(lattice, dtype=bool), out, mine, flat,
-                         args.rings, args.min_axes, moved if args.follow else None)
+            moved = patch_mean_moves(lattice, moved, flat)
+        carry_to_creases(lattice, out, mine, flat, args.rings, args.min_axes,
+                         moved if args.follow else None)
         return out
 
     flatpatches.flatten_patches = with_creases  # the pipeline looks it up at each call
