@@ -12,7 +12,9 @@ it, then scores ``agndc eval``:
     .venv/bin/python research/crease_cells.py DATA -o OUT --cache DIR [--shifts 3]
 
 ``--rings N`` carries the depth N cells past the rim (each ring from the one before);
-``--min-axes 2`` only to the cells on an edge between flat patches of two axes.
+``--min-axes 2`` only to the cells on an edge between flat patches of two axes; ``--creases
+concave`` (``convex``) only to the cells where the face meets a wall that rises from it (a
+face that drops away): their other corner columns are all inside (all outside).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from stage_eval import eval_parser, run_eval_cached
 
 def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray,
                      flat: np.ndarray, rings: int = 1, min_axes: int = 1,
-                     moved: np.ndarray | None = None) -> int:
+                     moved: np.ndarray | None = None, creases: str = "both") -> int:
     """Give the crease cells next to the flattened patches their patch's depth, in place.
 
     lattice: (X, Y, Z) bool; vertex: (X, Y, Z, 3) float offsets; pinned: (X, Y, Z, 3) bool,
@@ -33,7 +35,9 @@ def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray
     edge between two flat faces); moved: None, or (X, Y, Z, 3) float, how far the stage moved
     each coordinate it wrote (its depth less the network's): a crease cell is then moved by
     its neighbours' mean move instead of taking their depth, and is not pinned (the rim
-    follows its face). Returns the number of coordinates written."""
+    follows its face); creases: "both", or "concave" / "convex" for the cells whose other
+    corner columns are all inside / all outside only. Returns the number of coordinates
+    written."""
     from agndc_core.flatpatches import _pure_splits_last
 
     take_all = np.zeros(vertex.shape, dtype=bool)
@@ -55,11 +59,19 @@ def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray
                        (slice(None, -1), slice(1, None)), (slice(1, None), slice(1, None))]
             any_split = np.zeros(coord.shape, dtype=bool)
             any_reversed = np.zeros(coord.shape, dtype=bool)
+            any_inside = np.zeros(coord.shape, dtype=bool)
+            any_outside = np.zeros(coord.shape, dtype=bool)
             for a, b in corners:
                 any_split |= split_col[a, b]
                 any_reversed |= reversed_col[a, b]
+                any_inside |= (lower & upper)[a, b]
+                any_outside |= (~lower & ~upper)[a, b]
             all_split = _pure_splits_last(points, lower_inside)  # the patches' own cells
             crease = any_split & ~all_split & ~any_reversed
+            if creases == "concave":
+                crease &= any_inside & ~any_outside
+            elif creases == "convex":
+                crease &= any_outside & ~any_inside
             have = source & all_split
             for _ in range(rings):
                 total = np.zeros(coord.shape)
@@ -133,6 +145,9 @@ def main() -> None:
     parser.add_argument("--patch-move", action="store_true", help="with --follow: each "
                         "crease cell moves as far as its patches' mean moved, not its "
                         "neighbours")
+    parser.add_argument("--creases", choices=["both", "concave", "convex"], default="both",
+                        help="the crease cells of walls rising from the face, of faces "
+                        "dropping away, or both")
     args = parser.parse_args()
 
     from agndc_core import flatpatches
@@ -150,7 +165,7 @@ def main() -> None:
         if args.patch_move:
             moved = patch_mean_moves(lattice, moved, flat)
         carry_to_creases(lattice, out, mine, flat, args.rings, args.min_axes,
-                         moved if args.follow else None)
+                         moved if args.follow else None, args.creases)
         return out
 
     flatpatches.flatten_patches = with_creases  # the pipeline looks it up at each call

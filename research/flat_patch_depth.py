@@ -51,6 +51,9 @@ def main() -> None:
     parser.add_argument("--longest-bounds", action="store_true", help="also keep every vertex "
                         "of the longest side's outermost layers from beyond mid-layer, as "
                         "snap_to_bounds does with a mesh's bounding box")
+    parser.add_argument("--ties", choices=["midpoint", "clamp"], help="the outermost layers "
+                        "of every axis that ties for the longest side at the midpoint, or at "
+                        "the mean but not beyond mid-layer")
     parser.add_argument("--median", action="store_true", help="the median of the network's "
                         "coordinates on the outermost patches instead of their mean")
     args = parser.parse_args()
@@ -63,7 +66,8 @@ def main() -> None:
         layers = shipped(lattice, axis)
         outer = flatpatches.outer_cell_layers(lattice, axis)
         span = outer[True] - outer[False]  # the layers of points the shape spans
-        if span <= args.thin or 0 < args.far < span:
+        tied_mid = args.ties == "midpoint" and tied(lattice, span)
+        if span <= args.thin or 0 < args.far < span or tied_mid:
             return {kind: np.zeros_like(by_mean) for kind, by_mean in layers.items()}
         if args.depth == "mean":
             return {kind: np.ones_like(by_mean) for kind, by_mean in layers.items()}
@@ -106,7 +110,44 @@ def main() -> None:
         flatpatches.patch_depths = patch_medians
     if args.longest_bounds:
         flatpatches.flatten_patches = within_longest_bounds(flatpatches.flatten_patches)
+    if args.ties == "clamp":
+        flatpatches.flatten_patches = tied_within_mid_layer(flatpatches.flatten_patches)
     run_eval_cached(args)
+
+
+def tied(lattice, span: int) -> bool:
+    """Whether an axis spanning ``span`` layers ties with another for the longest side."""
+    from agndc_core import flatpatches
+
+    spans = sorted(layers[True] - layers[False]
+                   for layers in (flatpatches.outer_cell_layers(lattice, a) for a in range(3)))
+    return span == spans[-1] == spans[-2]
+
+
+def tied_within_mid_layer(flatten):
+    """``flatten`` with the patches it places on the outermost layers of an axis that ties for
+    the longest side kept from beyond mid-layer (outward: up on the upper side, down on the
+    lower)."""
+    from agndc_core import flatpatches
+
+    def flatten_and_clamp(lattice, vertex, *, in_place=False, pinned=None):
+        mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
+        before = mine.copy()
+        out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+        lattice = np.asarray(lattice, dtype=bool)
+        for axis in range(3):
+            outer = flatpatches.outer_cell_layers(lattice, axis)
+            if not tied(lattice, outer[True] - outer[False]):
+                continue
+            coord = np.moveaxis(out[..., axis], axis, -1)
+            written = np.moveaxis(mine[..., axis] & ~before[..., axis], axis, -1)
+            for kind, limit in ((True, np.minimum), (False, np.maximum)):
+                layer = coord[..., outer[kind]]  # a view into out
+                side = written[..., outer[kind]]
+                layer[side] = limit(layer[side], flatpatches.MIDPOINT)
+        return out
+
+    return flatten_and_clamp
 
 
 def within_longest_bounds(flatten):
