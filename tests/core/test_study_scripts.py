@@ -326,3 +326,67 @@ def test_crease_cells_of_a_box_take_both_patches_depths():
     pinned = np.zeros(ball.shape + (3,), dtype=bool)
     vertex = flatten_patches(ball, np.full(ball.shape + (3,), 0.5), pinned=pinned)
     assert script.carry_to_creases(ball, vertex, pinned, pinned.copy(), min_axes=2) == 0
+
+
+def test_crease_cells_tell_concave_from_convex_creases():
+    """crease_cells --creases: on an L-shaped block the cells along the inner (concave) edge
+    are taken with "concave" only, those along an outer (convex) edge with "convex" only."""
+    import numpy as np
+
+    from agndc_core.flatpatches import flatten_patches
+
+    script = research_script("crease_cells")
+    lattice = np.zeros((24, 16, 24), dtype=bool)
+    lattice[4:20, 4:12, 4:9] = True   # the foot
+    lattice[4:9, 4:12, 4:20] = True   # the upright
+    noisy = 0.5 + 0.1 * np.random.default_rng(1).standard_normal(lattice.shape + (3,))
+    inner, outer = (8, 8, 8), (19, 8, 8)  # the concave edge x = 8.x, z = 8.x; the foot's tip
+    taken = {}
+    for creases in ("concave", "convex"):
+        pinned = np.zeros(noisy.shape, dtype=bool)
+        vertex = flatten_patches(lattice, noisy.copy(), pinned=pinned)
+        flat = pinned.copy()
+        script.carry_to_creases(lattice, vertex, pinned, flat, creases=creases)
+        taken[creases] = pinned & ~flat
+    assert taken["concave"][inner].any() and not taken["convex"][inner].any()
+    assert taken["convex"][outer].any() and not taken["concave"][outer].any()
+
+
+def test_tied_axes_are_those_spanning_the_most_layers():
+    import numpy as np
+
+    script = research_script("flat_patch_depth")
+    lattice = np.zeros((20, 20, 20), dtype=bool)
+    # outer_cell_layers' spans: from the cell layer below the first occupied point layer to
+    # the last: x and y 12, z 5
+    lattice[3:15, 3:15, 5:10] = True
+    assert script.tied(lattice, 12) and not script.tied(lattice, 5)
+    lattice[3:16, 3:15, 5:10] = True  # x alone is the longest (13)
+    assert not script.tied(lattice, 13) and not script.tied(lattice, 12)
+
+
+def test_planar_faces_finds_a_tilted_boxs_planes_and_scores_its_own_surface_flat():
+    """planar_faces: a box turned 3° has six tilted planes; the box itself measured against
+    its samples is flat and on them (0°, RMS 0); a copy with its vertices moved off the planes
+    is not."""
+    import numpy as np
+    import trimesh
+
+    script = research_script("planar_faces")
+    box = trimesh.creation.box([1.0, 0.8, 0.5])
+    box = box.subdivide().subdivide().subdivide()
+    axis = np.array([1.0, 0.6, 0.35]) / np.linalg.norm([1.0, 0.6, 0.35])
+    box.apply_transform(trimesh.transformations.rotation_matrix(np.radians(3.0), axis))
+    voxel = 1.0 / 62
+    region, normals, offsets = script.planes_of(box, 1.0, 40 * voxel ** 2)
+    assert len(normals) == 6 and (region >= 0).all()
+    assert {script.plane_class(n) for n in normals} == {"tilted"}
+    points, index = trimesh.sample.sample_surface(box, 30000, seed=0)
+    rows = script.flatness(box.vertices, box.faces, points, region[index], normals, offsets,
+                           voxel, 2.0)
+    assert len(rows) == 6
+    assert all(r["normal_deg"] < 1e-3 and r["rms_vx"] < 1e-6 for r in rows)
+    bumpy = box.vertices + 0.2 * voxel * np.random.default_rng(0).standard_normal(
+        box.vertices.shape)
+    rows = script.flatness(bumpy, box.faces, points, region[index], normals, offsets, voxel, 2.0)
+    assert all(r["normal_deg"] > 1.0 and r["rms_vx"] > 0.05 for r in rows)
