@@ -2,7 +2,8 @@
 
 ``research/tilted_boxes.py`` measures a rotated box, whose faces are known planes. This study
 finds the planes of any mesh: its triangles joined across edges where their normals agree within
-``--coplanar`` degrees, kept where the region covers at least ``--min-area`` square voxels. Each
+``--coplanar`` degrees, kept where the region covers at least ``--min-area`` square voxels and
+none of its vertices lies more than ``--max-offset`` voxels off its plane. Each
 method remeshes the mesh's grid alone (no bounding box) at ``--res``; each output triangle whose
 centroid's ground-truth neighbours within ``--margin`` voxels all belong to one plane (away from
 its rim, holes and creases) is that plane's. Per plane, then averaged over the planes of a class:
@@ -38,10 +39,12 @@ TILTED_DEGREES = 15.0
 SAMPLES_PER_VOXEL2 = 3.0
 
 
-def planes_of(mesh, coplanar_deg: float, min_area: float):
+def planes_of(mesh, coplanar_deg: float, min_area: float, max_offset: float = np.inf):
     """(region (F,) int, -1 off the large planes; normals (P, 3); offsets (P,)) of a trimesh:
     triangles joined across edges whose normals agree within ``coplanar_deg``, regions of at
-    least ``min_area`` (the mesh's units squared) kept, each with its area-weighted plane."""
+    least ``min_area`` (the mesh's units squared) kept, each with its area-weighted plane, if
+    none of its vertices lies farther than ``max_offset`` from it (a gently curved surface
+    tessellated finely joins up too)."""
     import trimesh
 
     pairs = mesh.face_adjacency
@@ -51,12 +54,15 @@ def planes_of(mesh, coplanar_deg: float, min_area: float):
     large = np.flatnonzero(area >= min_area)
     region = np.full(len(mesh.faces), -1)
     normals, offsets = [], []
-    for index, label in enumerate(large):
+    for label in large:
         faces = labels == label
         weights = mesh.area_faces[faces]
         normal = (mesh.face_normals[faces] * weights[:, None]).sum(axis=0)
         normal /= np.linalg.norm(normal)
         centre = (mesh.triangles_center[faces] * weights[:, None]).sum(axis=0) / weights.sum()
+        if np.abs((mesh.vertices[mesh.faces[faces]] - centre) @ normal).max() > max_offset:
+            continue
+        index = len(normals)
         region[faces] = index
         normals.append(normal)
         offsets.append(float(normal @ centre))
@@ -137,6 +143,8 @@ def main() -> None:
     parser.add_argument("--coplanar", type=float, default=1.0, help="degrees")
     parser.add_argument("--min-area", type=float, default=40.0, help="square voxels")
     parser.add_argument("--margin", type=float, default=2.0, help="voxels")
+    parser.add_argument("--max-offset", type=float, default=0.02, help="voxels: how far a "
+                        "plane's vertices may lie from it")
     parser.add_argument("--per-mesh", action="store_true")
     args = parser.parse_args()
 
@@ -155,7 +163,8 @@ def main() -> None:
         vertices, faces = load_mesh(path)
         truth = trimesh.Trimesh(vertices, faces, process=False)
         voxel = float(np.abs(voxelize(vertices, faces, args.res).affine[0, 0]))
-        region, normals, offsets = planes_of(truth, args.coplanar, args.min_area * voxel ** 2)
+        region, normals, offsets = planes_of(truth, args.coplanar, args.min_area * voxel ** 2,
+                                             args.max_offset * voxel)
         count = int(SAMPLES_PER_VOXEL2 * truth.area / voxel ** 2)
         points, index = trimesh.sample.sample_surface(truth, count, seed=0)
         kind_of = [plane_class(n) for n in normals]

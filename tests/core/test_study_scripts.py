@@ -390,3 +390,7 @@ def test_planar_faces_finds_a_tilted_boxs_planes_and_scores_its_own_surface_flat
         box.vertices.shape)
     rows = script.flatness(bumpy, box.faces, points, region[index], normals, offsets, voxel, 2.0)
     assert all(r["normal_deg"] > 1.0 and r["rms_vx"] > 0.05 for r in rows)
+    # a finely tessellated cylinder's side joins up within 1° but is no plane; its caps are
+    tube = trimesh.creation.cylinder(radius=0.3, height=1.0, sections=720)
+    assert len(script.planes_of(tube, 1.0, 40 * voxel ** 2)[1]) == 3
+    assert len(script.planes_of(tube, 1.0, 40 * voxel ** 2, 0.02 * voxel)[1]) == 2
