@@ -394,3 +394,35 @@ def test_planar_faces_finds_a_tilted_boxs_planes_and_scores_its_own_surface_flat
     tube = trimesh.creation.cylinder(radius=0.3, height=1.0, sections=720)
     assert len(script.planes_of(tube, 1.0, 40 * voxel ** 2)[1]) == 3
     assert len(script.planes_of(tube, 1.0, 40 * voxel ** 2, 0.02 * voxel)[1]) == 2
+
+
+def test_plane_regions_put_a_bumpy_tilted_face_on_its_plane_and_keep_the_rims():
+    """plane_regions: a box turned 5° with its vertices jittered off its faces: the interior
+    vertices of each face go onto one plane, the vertices on its edges stay; an axis-aligned
+    box is the flat-patch stage's and is left as it is."""
+    import numpy as np
+    import trimesh
+
+    script = research_script("plane_regions")
+    box = trimesh.creation.box([20.0, 16.0, 10.0]).subdivide().subdivide().subdivide()
+    for turn, moved in ((5.0, True), (0.0, False)):
+        mesh = box.copy()
+        axis = np.array([1.0, 0.6, 0.35])
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(turn), axis))
+        bumpy = mesh.vertices + 0.01 * np.random.default_rng(0).standard_normal(
+            mesh.vertices.shape)
+        out = script.snap_planar_regions(bumpy, mesh.faces)
+        on_edge = (np.abs(np.abs(box.vertices) - [10.0, 8.0, 5.0]) < 1e-9).sum(axis=1) >= 2
+        assert np.array_equal(out[on_edge], bumpy[on_edge])
+        if not moved:
+            assert np.array_equal(out, bumpy)
+            continue
+        # each face's interior vertices lie on one plane (their own least-squares plane)
+        for k, half in enumerate((10.0, 8.0, 5.0)):
+            face = (np.abs(box.vertices[:, k] - half) < 1e-9) & ~on_edge
+
+            def off_plane(points):
+                centred = points - points.mean(axis=0)
+                return np.linalg.svd(centred, full_matrices=False)[1][2] / np.sqrt(len(points))
+
+            assert off_plane(out[face]) < 1e-9 < 1e-3 < off_plane(bumpy[face])
