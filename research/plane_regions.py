@@ -128,12 +128,12 @@ def snap_planar_regions(vertices, faces, fixed=None, *, join=4.0, keep=6.0, band
 
 def main() -> None:
     parser = eval_parser(__doc__, cache=True)
-    parser.add_argument("--join", type=float, default=4.0)
-    parser.add_argument("--keep", type=float, default=6.0)
-    parser.add_argument("--band", type=float, default=0.3)
-    parser.add_argument("--min-faces", type=int, default=40)
-    parser.add_argument("--rms", type=float, default=0.08)
-    parser.add_argument("--max-tilt", type=float, default=90.0)
+    parser.add_argument("--join", type=float, default=4.0, help="degrees between neighbours")
+    parser.add_argument("--keep", type=float, default=6.0, help="degrees off the region's plane")
+    parser.add_argument("--band", type=float, default=0.3, help="voxels off the region's plane")
+    parser.add_argument("--min-faces", type=int, default=40, help="faces of a region")
+    parser.add_argument("--rms", type=float, default=0.08, help="voxels RMS about the plane")
+    parser.add_argument("--max-tilt", type=float, default=90.0, help="degrees off an axis")
     args = parser.parse_args()
 
     from agndc_core import pipeline
