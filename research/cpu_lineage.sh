@@ -18,7 +18,11 @@
 # sheet-training.md). Stage 11: the same, with 900 new training shapes (DATA_fresh, seeds from
 # 40,000) in place of DATA: whether new shapes move what the same shapes did not (they did
 # not). Stage 12: the shipped weights on all 2,000 shapes (DATA, DATA_fresh, the sheets) at
-# a lower learning rate (3e-5), 1,200 steps, a checkpoint every 400. A stage is kept short
+# a lower learning rate (3e-5), 1,200 steps, a checkpoint every 400 (its steps 400 and 800 did
+# not beat the shipped weights; it goes on after stage 13). Stage 13: agndc_fast distilled
+# again, from the shipped AGNDC instead of the one before it: the teacher's vertices on DATA and
+# the sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
+# distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.
 #
@@ -48,12 +52,20 @@ which=${3:-current}
 export OMP_NUM_THREADS=1
 model='{"width": 16, "snake_kernel": 5, "band_radius": 4}'
 shipped_config='{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false}'
+student_config='{"width": 16, "snake_kernel": 5, "band_radius": 4, "surface_nets_prior": false,
+    "use_snake": false, "use_attention": false}'
 common=(--data "$data" --batch 4 --quadric-floor 1.0 --outside-crops --threads 1 --model "$model")
 
 generate() {  # generate FOLDER ARGS...: agndc train-data into FOLDER unless it is complete
     local folder=$1; shift
     if [[ ! -f "$folder/.done" ]]; then
         .venv/bin/agndc train-data -o "$folder" --workers 1 "$@" && touch "$folder/.done"
+    fi
+}
+
+distil() {  # distil FOLDER OUT: the teacher's (the shipped AGNDC's) labels, unless complete
+    if [[ ! -f "$2/.done" ]]; then
+        .venv/bin/agndc distil-data --data "$1" -o "$2" --threads 1 && touch "$2/.done"
     fi
 }
 
@@ -89,6 +101,12 @@ current)
     stage fresh_agndc16 --data "$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 13 (before stage 12 ends): agndc_fast distilled again from the shipped AGNDC
+    distil "$data" "${data}_distilled"
+    distil "$sheets" "${sheets}_distilled"
+    stage student_agndc16 --data "${data}_distilled,${sheets}_distilled" \
+        --init agndc_core/weights/agndc.safetensors --init-matching --model "$student_config" \
+        --steps 3000,300,300 --lr 5e-4 --ema 0.99 --seed 21 --val-steps 1000,2000,3000
     stage all_agndc16 --data "$data,$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
