@@ -124,12 +124,18 @@ def outer_cell_layers(lattice: np.ndarray, axis: int) -> dict[bool, int]:
     return {True: int(occupied[-1]), False: int(occupied[0]) - 1}
 
 
+def layer_spans(lattice: np.ndarray) -> list[int]:
+    """[x, y, z]: how many cell layers the shape spans along each axis, from its outermost
+    face on one side to the other's (``outer_cell_layers``; 0 for an empty lattice)."""
+    return [layers[True] - layers[False]
+            for layers in (outer_cell_layers(lattice, axis) for axis in range(3))]
+
+
 def longest_axis(lattice: np.ndarray) -> int | None:
     """The axis along which the occupied points span strictly more layers than along the two
     others (a mesh's longest side, where ``voxelize`` puts the bounding faces mid-layer);
     None for a tie or an empty lattice."""
-    spans = [layers[True] - layers[False]
-             for layers in (outer_cell_layers(lattice, axis) for axis in range(3))]
+    spans = layer_spans(lattice)
     longest = int(np.argmax(spans))
     if spans[longest] <= 0 or sorted(spans)[1] == spans[longest]:
         return None

@@ -20,7 +20,7 @@ face that drops away): their other corner columns are all inside (all outside).
 from __future__ import annotations
 
 import numpy as np
-from stage_eval import eval_parser, run_eval_cached
+from stage_eval import eval_parser, flatten_writing, run_eval_cached
 
 
 def carry_to_creases(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray,
@@ -155,12 +155,10 @@ def main() -> None:
     flatten = flatpatches.flatten_patches
 
     def with_creases(lattice, vertex, *, in_place=False, pinned=None):
-        mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
-        before = mine.copy()
         network = np.array(vertex, copy=True)
-        out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+        mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
+        out, flat = flatten_writing(flatten, lattice, vertex, in_place, mine)
         lattice = np.asarray(lattice, dtype=bool)
-        flat = mine & ~before
         moved = out - network
         if args.patch_move:
             moved = patch_mean_moves(lattice, moved, flat)

@@ -30,7 +30,7 @@ docs/experiments/flat-patches.md ("Inside the shape's extent, the midpoint", "Tr
 from __future__ import annotations
 
 import numpy as np
-from stage_eval import eval_parser, run_eval_cached
+from stage_eval import eval_parser, flatten_writing, run_eval_cached
 
 
 def main() -> None:
@@ -84,15 +84,13 @@ def main() -> None:
         flatten = flatpatches.flatten_patches
 
         def centred(lattice, vertex, *, in_place=False, pinned=None):
-            mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
-            before = mine.copy()
-            out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+            out, wrote = flatten_writing(flatten, lattice, vertex, in_place, pinned)
             for axis in range(3):
                 outer = flatpatches.outer_cell_layers(lattice, axis)
                 if not 0 < outer[True] - outer[False] <= args.symmetric_thin:
                     continue
                 coord = np.moveaxis(out[..., axis], axis, -1)
-                written = np.moveaxis(mine[..., axis] & ~before[..., axis], axis, -1)
+                written = np.moveaxis(wrote[..., axis], axis, -1)
                 sides = [written[..., outer[kind]] for kind in (False, True)]
                 if not all(side.any() for side in sides):
                     continue  # a face of the slab is not flat: nothing to centre
@@ -119,8 +117,7 @@ def tied(lattice, span: int) -> bool:
     """Whether an axis spanning ``span`` layers ties with another for the longest side."""
     from agndc_core import flatpatches
 
-    spans = sorted(layers[True] - layers[False]
-                   for layers in (flatpatches.outer_cell_layers(lattice, a) for a in range(3)))
+    spans = sorted(flatpatches.layer_spans(lattice))
     return span == spans[-1] == spans[-2]
 
 
@@ -131,16 +128,14 @@ def tied_within_mid_layer(flatten):
     from agndc_core import flatpatches
 
     def flatten_and_clamp(lattice, vertex, *, in_place=False, pinned=None):
-        mine = np.zeros(vertex.shape, dtype=bool) if pinned is None else pinned
-        before = mine.copy()
-        out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+        out, wrote = flatten_writing(flatten, lattice, vertex, in_place, pinned)
         lattice = np.asarray(lattice, dtype=bool)
         for axis in range(3):
             outer = flatpatches.outer_cell_layers(lattice, axis)
             if not tied(lattice, outer[True] - outer[False]):
                 continue
             coord = np.moveaxis(out[..., axis], axis, -1)
-            written = np.moveaxis(mine[..., axis] & ~before[..., axis], axis, -1)
+            written = np.moveaxis(wrote[..., axis], axis, -1)
             for kind, limit in ((True, np.minimum), (False, np.maximum)):
                 layer = coord[..., outer[kind]]  # a view into out
                 side = written[..., outer[kind]]

@@ -86,11 +86,10 @@ def flatness(vertices, faces, truth_points, truth_region, normals, offsets, voxe
     centroid is p's (and there is one)."""
     from scipy.spatial import cKDTree
 
-    tri = vertices[faces]
-    centre = tri.mean(axis=1)
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    normal = cross / np.maximum(2.0 * area, 1e-30)[:, None]
+    from agndc_core.normalfilter import face_geometry
+
+    normal, area, centre = face_geometry(np.asarray(vertices, dtype=np.float64),
+                                         np.asarray(faces, dtype=np.int64))
     tree = cKDTree(truth_points)
     near = tree.query_ball_point(centre, margin * voxel)
     counts = np.array([len(n) for n in near])
@@ -152,7 +151,7 @@ def main() -> None:
 
     from agndc_core.gridio import load_mesh
     from agndc_core.pipeline import remesh_mesh
-    from agndc_core.voxelize import voxelize
+    from agndc_core.voxelize import checked_surface, grid_layout
 
     kinds = [k for k in args.kinds.split(",") if k]
     shapes = [s for s in args.shapes.split(",") if s]
@@ -162,7 +161,8 @@ def main() -> None:
     for path in meshes_of(args.paths, kinds, shapes):
         vertices, faces = load_mesh(path)
         truth = trimesh.Trimesh(vertices, faces, process=False)
-        voxel = float(np.abs(voxelize(vertices, faces, args.res).affine[0, 0]))
+        used = checked_surface(vertices, faces)[2]  # voxelize's extent, and so its voxel
+        voxel = grid_layout(np.ptp(used, axis=0), args.res)[0]
         region, normals, offsets = planes_of(truth, args.coplanar, args.min_area * voxel ** 2,
                                              args.max_offset * voxel)
         count = int(SAMPLES_PER_VOXEL2 * truth.area / voxel ** 2)

@@ -73,10 +73,9 @@ def snap_planar_regions(vertices, faces, fixed=None, *, join=4.0, keep=6.0, band
     plane; ``fixed`` (V, 3) bool, coordinates that must not move (their vertices stay)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    cross = np.cross(vertices[faces[:, 1]] - vertices[faces[:, 0]],
-                     vertices[faces[:, 2]] - vertices[faces[:, 0]])
-    areas = 0.5 * np.linalg.norm(cross, axis=1)
-    normal = cross / np.maximum(2.0 * areas, 1e-30)[:, None]
+    from agndc_core.normalfilter import face_geometry
+
+    normal, areas, face_centre = face_geometry(vertices, faces)
     pairs = edge_pairs(faces)
     cos_join = np.cos(np.radians(join))
     label = components(len(faces), pairs, np.einsum("ij,ij->i", normal[pairs[:, 0]],
@@ -87,7 +86,6 @@ def snap_planar_regions(vertices, faces, fixed=None, *, join=4.0, keep=6.0, band
         plane_of[big] = np.arange(len(big))
         plane = plane_of[label]
         inside = plane >= 0
-        face_centre = vertices[faces].mean(axis=1)
         off_angle = np.abs(np.einsum("ij,ij->i", normal[inside], normals[plane[inside]]))
         off_band = np.abs(np.einsum("ij,ij->i", face_centre[inside], normals[plane[inside]])
                           - offsets[plane[inside]])

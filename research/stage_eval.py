@@ -100,3 +100,15 @@ def run_eval_cached(args: argparse.Namespace) -> None:
         run_eval(args)
     else:
         run_eval_with_prediction(args, cached(args.cache))
+
+
+def flatten_writing(flatten, lattice, vertex, in_place: bool, pinned):
+    """``flatten(lattice, vertex, in_place=..., pinned=...)`` (``flatten_patches`` or a study's
+    replacement of it) -> (its output, the (X, Y, Z, 3) bool coordinates this call wrote): the
+    studies that act on the patches a call placed, and not on coordinates pinned before."""
+    import numpy as np
+
+    mine = np.zeros(np.shape(vertex), dtype=bool) if pinned is None else pinned
+    before = mine.copy()
+    out = flatten(lattice, vertex, in_place=in_place, pinned=mine)
+    return out, mine & ~before
