@@ -50,23 +50,24 @@ def planes_of(mesh, coplanar_deg: float, min_area: float, max_offset: float = np
     pairs = mesh.face_adjacency
     keep = mesh.face_adjacency_angles < np.radians(coplanar_deg)
     labels = trimesh.graph.connected_component_labels(pairs[keep], node_count=len(mesh.faces))
-    area = np.bincount(labels, weights=mesh.area_faces)
-    large = np.flatnonzero(area >= min_area)
-    region = np.full(len(mesh.faces), -1)
-    normals, offsets = [], []
-    for label in large:
-        faces = labels == label
-        weights = mesh.area_faces[faces]
-        normal = (mesh.face_normals[faces] * weights[:, None]).sum(axis=0)
-        normal /= np.linalg.norm(normal)
-        centre = (mesh.triangles_center[faces] * weights[:, None]).sum(axis=0) / weights.sum()
-        if np.abs((mesh.vertices[mesh.faces[faces]] - centre) @ normal).max() > max_offset:
-            continue
-        index = len(normals)
-        region[faces] = index
-        normals.append(normal)
-        offsets.append(float(normal @ centre))
-    return region, np.array(normals).reshape(-1, 3), np.array(offsets)
+    weights = mesh.area_faces
+    area = np.bincount(labels, weights=weights)
+    # per label: the area-weighted normal and centre, and the farthest vertex from that plane
+    normal = np.stack([np.bincount(labels, weights * mesh.face_normals[:, k]) for k in range(3)],
+                      axis=1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    centre = np.stack([np.bincount(labels, weights * mesh.triangles_center[:, k])
+                       for k in range(3)], axis=1) / np.maximum(area, 1e-300)[:, None]
+    corners = mesh.vertices[mesh.faces]  # (F, 3 corners, 3)
+    reach = np.abs(np.einsum("fck,fk->fc", corners - centre[labels][:, None],
+                             normal[labels])).max(axis=1)
+    farthest = np.zeros(len(area))
+    np.maximum.at(farthest, labels, reach)
+    kept = np.flatnonzero((area >= min_area) & (farthest <= max_offset))
+    index_of = np.full(len(area), -1)
+    index_of[kept] = np.arange(len(kept))
+    return (index_of[labels], normal[kept].reshape(-1, 3),
+            np.einsum("pk,pk->p", normal[kept], centre[kept]))
 
 
 def plane_class(normal: np.ndarray) -> str:
@@ -90,30 +91,30 @@ def flatness(vertices, faces, truth_points, truth_region, normals, offsets, voxe
 
     normal, area, centre = face_geometry(np.asarray(vertices, dtype=np.float64),
                                          np.asarray(faces, dtype=np.int64))
-    tree = cKDTree(truth_points)
-    near = tree.query_ball_point(centre, margin * voxel)
-    counts = np.array([len(n) for n in near])
-    flat = np.concatenate([truth_region[n] for n in near if n] or [np.zeros(0, dtype=int)])
-    owner_of = np.repeat(np.arange(len(centre)), counts)
+    # every (triangle, sample) pair within the margin, gathered in C
+    pairs = cKDTree(centre).sparse_distance_matrix(cKDTree(truth_points), margin * voxel,
+                                                   output_type="ndarray")
+    owner_of, flat = pairs["i"], truth_region[pairs["j"]]
+    counts = np.bincount(owner_of, minlength=len(centre))
     lo = np.full(len(centre), np.iinfo(np.int64).max)
     hi = np.full(len(centre), np.iinfo(np.int64).min)
     np.minimum.at(lo, owner_of, flat)
     np.maximum.at(hi, owner_of, flat)
     plane = np.where((counts > 0) & (lo == hi), lo, -1)
-    rows = []
-    for p in range(len(normals)):
-        mine = plane == p
-        if not mine.any():
-            continue
-        cos = np.abs(normal[mine] @ normals[p])
-        angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
-        weights = area[mine]
-        distance = (centre[mine] @ normals[p] - offsets[p]) / voxel
-        rows.append({"plane": p, "normal_deg": float(np.average(angle, weights=weights)),
-                     "over_2deg": float(weights[angle > 2.0].sum() / weights.sum()),
-                     "rms_vx": float(np.sqrt(np.average(distance ** 2, weights=weights))),
-                     "area": float(weights.sum())})
-    return rows
+    mine = plane >= 0
+    which, weights = plane[mine], area[mine]
+    cos = np.abs(np.einsum("fk,fk->f", normal[mine], normals[which]))
+    angle = np.degrees(np.arccos(np.clip(cos, 0.0, 1.0)))
+    distance = (np.einsum("fk,fk->f", centre[mine], normals[which]) - offsets[which]) / voxel
+    n = len(normals)
+    total = np.bincount(which, weights, minlength=n)
+    degrees = np.bincount(which, weights * angle, minlength=n)
+    over = np.bincount(which, weights * (angle > 2.0), minlength=n)
+    square = np.bincount(which, weights * distance ** 2, minlength=n)
+    return [{"plane": int(p), "normal_deg": float(degrees[p] / total[p]),
+             "over_2deg": float(over[p] / total[p]), "rms_vx": float(np.sqrt(square[p] / total[p])),
+             "area": float(total[p])}
+            for p in np.flatnonzero(np.bincount(which, minlength=n))]
 
 
 def meshes_of(paths, kinds, shapes) -> list[Path]:

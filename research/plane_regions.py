@@ -49,22 +49,24 @@ def components(n: int, pairs: np.ndarray, keep: np.ndarray) -> np.ndarray:
 
 
 def fit_planes(vertices, faces, label, areas, min_faces: int):
-    """{region: (normal, offset, faces mask index)} least-squares planes (area-weighted
-    vertices) of the labels with at least ``min_faces`` faces; returns (labels kept (R,),
-    normals (R, 3), offsets (R,))."""
-    counts = np.bincount(label)
-    big = np.flatnonzero(counts >= min_faces)
-    normals, offsets = [], []
-    for region in big:
-        mine = label == region
-        corners = vertices[faces[mine]].reshape(-1, 3)
-        weights = np.repeat(areas[mine], 3)
-        centre = np.average(corners, axis=0, weights=weights)
-        spread = (corners - centre) * np.sqrt(weights)[:, None]
-        normal = np.linalg.svd(spread, full_matrices=False)[2][2]
-        normals.append(normal)
-        offsets.append(float(normal @ centre))
-    return big, np.array(normals).reshape(-1, 3), np.array(offsets)
+    """Least-squares planes (the faces' corners, weighted by the face areas) of the labels with
+    at least ``min_faces`` faces: (labels kept (R,), unit normals (R, 3), offsets (R,))."""
+    big = np.flatnonzero(np.bincount(label) >= min_faces)
+    plane_of = np.full(label.max() + 1, -1)
+    plane_of[big] = np.arange(len(big))
+    mine = plane_of[label] >= 0
+    which = np.repeat(plane_of[label][mine], 3)  # a plane per corner
+    corners = vertices[faces[mine]].reshape(-1, 3)
+    weights = np.repeat(areas[mine], 3)
+    total = np.bincount(which, weights, minlength=len(big))
+    centre = np.stack([np.bincount(which, weights * corners[:, k], minlength=len(big))
+                       for k in range(3)], axis=1) / total[:, None]
+    # the weighted scatter about each region's own centre (two passes: no cancellation)
+    spread = corners - centre[which]
+    scatter = np.zeros((len(big), 3, 3))
+    np.add.at(scatter, which, weights[:, None, None] * spread[:, :, None] * spread[:, None, :])
+    normals = np.linalg.eigh(scatter)[1][:, :, 0]  # the direction of least spread
+    return big, normals, np.einsum("rk,rk->r", normals, centre)
 
 
 def snap_planar_regions(vertices, faces, fixed=None, *, join=4.0, keep=6.0, band=0.3,
@@ -112,11 +114,12 @@ def snap_planar_regions(vertices, faces, fixed=None, *, join=4.0, keep=6.0, band
         interior &= ~np.asarray(fixed).any(axis=1)
     tilt = np.degrees(np.arccos(np.clip(np.abs(normals).max(axis=1), 0.0, 1.0)))
     good = (tilt >= ALIGNED_DEGREES) & (tilt <= max_tilt)
-    for index in np.flatnonzero(good):
-        mine = face_plane == index
-        corners = vertices[faces[mine]].reshape(-1, 3)
-        distance = corners @ normals[index] - offsets[index]
-        good[index] = np.sqrt(np.mean(distance ** 2)) <= rms
+    on_plane = face_plane >= 0
+    which = np.repeat(face_plane[on_plane], 3)
+    corners = vertices[faces[on_plane]].reshape(-1, 3)
+    distance = np.einsum("ck,ck->c", corners, normals[which]) - offsets[which]
+    square = np.bincount(which, distance ** 2, minlength=len(big))
+    good &= np.sqrt(square / np.bincount(which, minlength=len(big))) <= rms
     moving = interior & good[np.maximum(lo, 0)]
     which = lo[moving]
     distance = np.einsum("ij,ij->i", out[moving], normals[which]) - offsets[which]
