@@ -875,6 +875,66 @@ def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     return _to_arrays(Manifold.cube((1.0, 0.7, thickness), center=True))
 
 
+# ---------------------------------------------------------------- sharp spikes (training)
+
+#: spiky parts (``spiky_shape``): how many spikes, their base radius and height in voxels of
+#: the sample's grid (thin enough that the grid keeps only part of each: a cone under ~1 voxel
+#: across leaves no voxel centre inside), and their sides (pyramids and round cones)
+SPIKE_COUNT = (2, 10)
+SPIKE_RADIUS_VOXELS = (0.6, 3.0)
+SPIKE_HEIGHT_VOXELS = (5.0, 25.0)
+SPIKE_SIDES = (3, 4, 6, 48)
+
+
+def _turn_z_to(direction: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation taking +z to the unit ``direction`` (Rodrigues about z × direction)."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(z, direction)
+    sin, cos = np.linalg.norm(axis), float(direction @ z)
+    if sin < 1e-9:
+        return np.diag([1.0, 1.0, 1.0]) if cos > 0 else np.diag([1.0, -1.0, -1.0])
+    k = np.cross(np.eye(3), axis / sin)  # the cross-product matrix of the unit axis
+    return np.eye(3) + sin * k + (1 - cos) * k @ k
+
+
+def spiky_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """``generate_shape(seed)`` with 2-10 sharp spikes standing on its surface along the
+    outward normal: cones and 3-, 4- and 6-sided pyramids ``SPIKE_RADIUS_VOXELS`` across at
+    the base and ``SPIKE_HEIGHT_VOXELS`` tall, in units of ``voxel`` (a fraction of the longest
+    side): spires, crown points, thorns, the teeth of a printed roof. Normalised again (longest
+    side 1), so a spike that sticks out past the bounding box shrinks the voxel a little.
+    Deterministic in (seed, voxel); the plain shape if the union fails."""
+    vertices, faces = generate_shape(seed)
+    body = Manifold(Mesh64(vert_properties=vertices, tri_verts=faces.astype(np.uint32)))
+    corners = vertices[faces]  # (F, 3, 3)
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, attempt, 9))
+        count = int(rng.integers(SPIKE_COUNT[0], SPIKE_COUNT[1] + 1))
+        face = rng.choice(len(faces), size=count, p=area / area.sum())
+        weights = rng.dirichlet(np.ones(3), size=count)  # uniform points of each triangle
+        foot = np.einsum("nc,nck->nk", weights, corners[face])
+        normal = cross[face] / area[face, None]
+        radius = rng.uniform(*SPIKE_RADIUS_VOXELS, count) * voxel
+        height = rng.uniform(*SPIKE_HEIGHT_VOXELS, count) * voxel
+        sides = rng.choice(SPIKE_SIDES, size=count)
+        spikes = []
+        for k in range(count):  # a handful of spikes per shape
+            affine = np.zeros((3, 4))
+            affine[:, :3] = _turn_z_to(normal[k])
+            affine[:, 3] = foot[k] - normal[k] * voxel  # sunk a voxel into the surface
+            spikes.append(Manifold.cylinder(height[k] + voxel, radius[k], 0.0, int(sides[k]))
+                          .transform(affine))
+        m = Manifold.batch_boolean([body, *spikes], OpType.Add)
+        if m.is_empty() or m.status().name != "NoError":
+            continue
+        out_vertices, out_faces = _to_arrays(m)
+        if _edge_manifold(out_faces):
+            return out_vertices, out_faces
+    return vertices, faces
+
+
 def _section_box(section: CrossSection) -> tuple[np.ndarray, np.ndarray]:
     """(2,) min and max corners of a cross-section."""
     box = section.bounds()

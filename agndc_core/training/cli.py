@@ -24,6 +24,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--tilted", type=float, default=0.0, help="share of the grid-aligned "
                    "samples (sheets aside) turned 1-15 degrees off the axes instead, like a "
                    "part modelled or scanned slightly askew (default 0)")
+    p.add_argument("--spikes", type=float, default=0.0, help="share of the samples (sheets "
+                   "aside) that grow 2-10 sharp spikes 0.6-3 voxels in radius at the base, "
+                   "5-25 voxels tall: spires, thorns, crown points (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -116,7 +119,7 @@ def _cmd_data(args) -> int:
         raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds, wrinkled=args.wrinkled,
-                          sheets=args.sheets, tilted=args.tilted)
+                          sheets=args.sheets, tilted=args.tilted, spikes=args.spikes)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

@@ -25,6 +25,7 @@ from ..study.shapes import (
     shape_family,
     sheet_shape,
     small_turn,
+    spiky_shape,
 )
 from ..voxelize import voxelize
 
@@ -63,7 +64,8 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
-                  wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0) -> dict:
+                  wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0,
+                  spikes: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -77,8 +79,10 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     "sheet", no wrinkles), drawn from a stream of its own: the other seeds' recipes are those
     of ``sheets=0``. ``tilted`` is the share of the grid-aligned samples other than sheets that
     are turned ``TILT_DEGREES`` off the axes instead (another stream of its own; the field
-    ``tilt_degrees`` records the angle). The recipe also records the shape family and whether
-    the sample is grid-aligned.
+    ``tilt_degrees`` records the angle). ``spikes`` is the share of the samples other than
+    sheets whose shape grows sharp spikes a few voxels across (``shapes.spiky_shape`` at the
+    recipe's voxel; field ``spikes``, no wrinkles), a stream of its own too. The recipe also
+    records the shape family and whether the sample is grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
@@ -115,6 +119,10 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         recipe["axis_aligned"] = False
         recipe["tilt_degrees"] = float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2,
                                                                     -1, 1))))
+    spike_rng = np.random.default_rng([seed, 1234, 9])
+    if spikes > 0 and spike_rng.random() < spikes and "sheet_voxels" not in recipe:
+        recipe.pop("wrinkles", None)
+        recipe["spikes"] = True
     return recipe
 
 
@@ -138,6 +146,8 @@ def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
     if "sheet_voxels" in recipe:  # voxelize spans the longest side (1) with resolution - 2
         vertices, faces = sheet_shape(recipe["seed"],
                                       recipe["sheet_voxels"] / (recipe["resolution"] - 2))
+    elif recipe.get("spikes"):
+        vertices, faces = spiky_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
     else:
         vertices, faces = generate_shape(recipe["seed"])
     if "wrinkles" in recipe:
@@ -187,7 +197,7 @@ def _write_one(args) -> str:
 
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
                   resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
-                  sheets: float = 0.0, tilted: float = 0.0) -> list[Path]:
+                  sheets: float = 0.0, tilted: float = 0.0, spikes: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -204,8 +214,9 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
         raise AGNDCError(f"training resolutions must satisfy 8 <= lo <= hi, got {lo}..{hi}")
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted),
-             out_dir / f"sample_{seed:06d}.npz") for seed in range(seed0, seed0 + n)]
+    jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted,
+                           spikes=spikes), out_dir / f"sample_{seed:06d}.npz")
+            for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:
             paths = list(tqdm(pool.imap(_write_one, jobs), total=n, desc="data",

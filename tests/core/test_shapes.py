@@ -16,6 +16,7 @@ from agndc_core.study.shapes import (
     is_axis_aligned,
     shape_family,
     sheet_shape,
+    spiky_shape,
 )
 from agndc_core.training.data import (
     RESOLUTION_RANGE,
@@ -235,3 +236,31 @@ def test_generate_dataset_matches_generate_shape():
     rows = list(generate_dataset(2, seed0=5))
     assert [r[0] for r in rows] == [5, 6]
     np.testing.assert_array_equal(rows[1][1], generate_shape(6)[0])
+
+
+def test_spike_recipes_keep_the_other_draws_and_grow_closed_sharp_spikes():
+    seeds = range(300)
+    plain = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3) for s in seeds]
+    spiky = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.25) for s in seeds]
+    grown = [b for b in spiky if b.get("spikes")]
+    candidates = [a for a in plain if "sheet_voxels" not in a]
+    assert len(grown) / len(candidates) == pytest.approx(0.25, abs=0.08)
+    for a, b in zip(plain, spiky):
+        if not b.get("spikes"):
+            assert b == a
+            continue
+        assert "sheet_voxels" not in a and "wrinkles" not in b
+        assert {k: v for k, v in b.items() if k != "spikes"} == {
+            k: v for k, v in a.items() if k != "wrinkles"}
+    # closed, outward, and sharper than the shape it grew from: spike tips are vertices whose
+    # angular defect exceeds pi (a cone of half-angle a has 2 pi (1 - sin a))
+    for recipe in grown[:4]:
+        mesh = trimesh.Trimesh(*recipe_mesh(recipe), process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        base = trimesh.Trimesh(*generate_shape(recipe["seed"]), process=False)
+        assert (mesh.vertex_defects > np.pi).sum() >= (base.vertex_defects > np.pi).sum() + 2
+    v, f = spiky_shape(grown[0]["seed"], 1 / 62)  # deterministic, normalised
+    np.testing.assert_array_equal(v, spiky_shape(grown[0]["seed"], 1 / 62)[0])
+    assert np.ptp(v, axis=0).max() == pytest.approx(1.0, abs=1e-12)
+    sample = make_sample(grown[0])
+    assert sample["lattice"].any()

@@ -1,0 +1,86 @@
+"""Rows of sharp cones on a slab (spires, crown points, the teeth of a printed gazebo roof):
+whether the networks lose to marching cubes on spikes in general, as AGNDC does on the dev mesh
+``1004825``, whose cones are thinner than a voxel over half their length.
+
+    .venv/bin/python research/spike_rows.py -o runs/spikes -n 12
+    .venv/bin/agndc eval runs/spikes -o out/spikes --res 64 --samples 30000 \
+        --methods mc,undc,agndc,agndc_fast,oracle_binary
+
+Each shape (deterministic in its seed, a stream of its own): a slab 3-8 voxels thick at 64³,
+0.1-0.3 of its length wide, with 3-8 cones along it, each 10-28 voxels tall with a base radius
+of 2-6 voxels (``--radius``; half-angles 4-30°), pointing up or down, off the row's line by up
+to 0.3 voxel; every third shape turned by Euler angles along a random direction, 3-12° in all.
+Written as OBJ files with a ``MANIFEST.csv`` (kind ``print``) that ``agndc eval`` reads.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+import numpy as np
+
+#: the seed stream of these shapes (apart from the training generator's and the families')
+SEED_STREAM = 777
+#: voxels per unit length at 64³ (the voxeliser's margin counted)
+VOXEL = 1.0 / 62
+
+
+def spike_row(seed: int, radius=(2.0, 6.0)) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) vertices (bounding box centred, longest side 1), (F, 3) faces of one shape; the
+    cones' base radii drawn from ``radius`` (voxels at 64³)."""
+    from manifold3d import Manifold
+
+    from agndc_core.study.shapes import _to_arrays
+
+    rng = np.random.default_rng((seed, SEED_STREAM))
+    count = int(rng.integers(3, 9))
+    thickness = rng.uniform(3, 8) * VOXEL
+    width = rng.uniform(0.1, 0.3)
+    shape = Manifold.cube((1.0, width, thickness), center=True)
+    for x in np.linspace(-0.44, 0.44, count):
+        height = rng.uniform(10, 28) * VOXEL
+        base = min(rng.uniform(*radius) * VOXEL, width / 2)
+        off = rng.uniform(-0.3, 0.3, size=2) * VOXEL
+        cone = Manifold.cylinder(height, base, 0.0, 48).translate(
+            (x + off[0], off[1], thickness / 2 - 0.001))
+        if rng.random() < 0.5:
+            cone = cone.mirror((0, 0, 1))  # pointing down from the slab's lower face
+        shape = shape + cone
+    if seed % 3 == 2:
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        shape = shape.rotate(tuple(axis * rng.uniform(3, 12)))
+    vertices, faces = _to_arrays(shape)
+    vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
+    return vertices / np.ptp(vertices, axis=0).max(), faces
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("-o", "--out", type=Path, required=True)
+    parser.add_argument("-n", type=int, default=12)
+    parser.add_argument("--radius", default="2,6", help="LO,HI base radius, voxels at 64³")
+    args = parser.parse_args()
+
+    from agndc_core.gridio import save_mesh
+
+    radius = tuple(float(r) for r in args.radius.split(","))
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for seed in range(args.n):
+        vertices, faces = spike_row(seed, radius)
+        name = f"spikes_{seed}.obj"
+        save_mesh(vertices, faces, args.out / name)
+        rows.append({"file": name, "kind": "print", "shape": "spike_row", "seed": seed,
+                     "faces": len(faces)})
+    with open(args.out / "MANIFEST.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    print(f"{len(rows)} shapes in {args.out}")
+
+
+if __name__ == "__main__":
+    main()
