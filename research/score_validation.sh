@@ -1,14 +1,16 @@
 #!/usr/bin/env bash
-# Score an AGNDC checkpoint on the generated validation family and the thin sheets, on the frames
-# a shipping decision needs (docs/training.md, "Evaluating"), and compare it with the shipped
-# weights scored the same way:
+# Score an AGNDC checkpoint on the generated validation family, the thin sheets and the rows of
+# spikes, on the frames a shipping decision needs (docs/training.md, "Evaluating"), and compare
+# it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/ and sheets/ (made by `bash research/score_validation.sh VAL data`: agndc
-# val-data, 48 shapes and 24 sheets, ~1 min). NAME without a CHECKPOINT scores the shipped
-# weights, together with marching cubes and oracle_binary (the reference; run it first, as
-# NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 / 128 the family centred, 64s /
-# 128s on 3 shifted grids per shape, sheets / sheets_s the sheets at 64^3. A finished frame is
-# skipped. Results: OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
+# VAL holds family/, sheets/, spikes/ and spikes_thin/ (made by `bash research/score_validation.sh
+# VAL data`: agndc val-data, 48 shapes and 24 sheets; research/spike_rows.py, 12 rows of cones
+# 2-6 and 12 of cones 0.8-2 voxels in radius at the base; ~1 min). NAME without a CHECKPOINT
+# scores the shipped weights, together with marching cubes and oracle_binary (the reference; run
+# it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 / 128 the family
+# centred, 64s / 128s on 3 shifted grids per shape, sheets / sheets_s the sheets at 64^3, spikes /
+# spikes_thin the rows of cones at 64^3. A finished frame is skipped. Results:
+# OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,6 +19,10 @@ agndc=.venv/bin/agndc
 if [[ ${2:-} == data ]]; then  # the validation data, once
     [[ -f $val/family/MANIFEST.csv ]] || $agndc val-data -o "$val/family" -n 48
     [[ -f $val/sheets/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets" -n 24
+    [[ -f $val/spikes/MANIFEST.csv ]] || .venv/bin/python research/spike_rows.py \
+        -o "$val/spikes" -n 12
+    [[ -f $val/spikes_thin/MANIFEST.csv ]] || .venv/bin/python research/spike_rows.py \
+        -o "$val/spikes_thin" -n 12 --radius 0.8,2
     exit 0
 fi
 out=$2 name=$3
@@ -35,7 +41,10 @@ for frame in $frames; do
         128s) args=("$val/family" --res 128 --shifts 3) ;;
         sheets) args=("$val/sheets" --res 64) ;;
         sheets_s) args=("$val/sheets" --res 64 --shifts 3) ;;
-        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s)" >&2; exit 2 ;;
+        spikes) args=("$val/spikes" --res 64) ;;
+        spikes_thin) args=("$val/spikes_thin" --res 64) ;;
+        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s spikes spikes_thin)" >&2
+           exit 2 ;;
     esac
     dest=$out/$name/$frame
     if [[ ! -f $dest/rows.csv ]]; then
