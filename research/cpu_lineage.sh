@@ -22,7 +22,9 @@
 # not beat the shipped weights; it goes on after stage 13). Stage 13: agndc_fast distilled
 # again, from the shipped AGNDC instead of the one before it: the teacher's vertices on DATA and
 # the sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
-# distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. A stage is kept short
+# distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. Stage 14: stage 10's
+# recipe with 300 shapes that grow sharp spikes added to its data (DATA_spikes, agndc train-data
+# --spikes 1.0; docs/experiments/spikes.md), checkpoints at 400 and 800. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.
 #
@@ -110,6 +112,12 @@ current)
     stage all_agndc16 --data "$data,$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
+    # stage 14: stage 10's recipe with 300 spiky shapes added (train-data --spikes 1.0)
+    spikes="${data}_spikes"
+    generate "$spikes" -n 300 --seed0 50000 --spikes 1.0
+    stage spike_agndc16 --data "$data,$sheets,$spikes" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \

@@ -110,7 +110,8 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
 
 
 def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
-    """data_mix: shares of family, placement and wrinkles, read back from sample files."""
+    """data_mix: shares of family, placement, wrinkles and spikes, read back from sample
+    files."""
     import json
 
     import numpy as np
@@ -119,7 +120,8 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     from agndc_core.training.data import sample_recipe
 
     mix = research_script("data_mix")
-    made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0) for s in range(120)]
+    made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0, spikes=0.3)
+            for s in range(120)]
     for recipe in made:  # only the recipe: what the script reads
         np.savez(tmp_path / f"sample_{recipe['seed']:06d}.npz", recipe=json.dumps(recipe))
     (tmp_path / "other.npz").touch()  # not a sample
@@ -130,8 +132,11 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     assert shares["sheet"] == pytest.approx(sheets / 120) and 0 < sheets < 60
     assert shares["tilted"] == pytest.approx(sum("tilt_degrees" in r for r in made) / 120)
     assert shares["tilted"] > 0.15 and shares["wrinkled"] > 0.15
+    assert shares["spiky"] == pytest.approx(sum(bool(r.get("spikes")) for r in made) / 120)
+    assert 0.1 < shares["spiky"] < 0.4
     assert sum(shares[p] for p in ("aligned", "tilted", "turned")) == pytest.approx(1.0)
-    families = [f for f in shares if f not in ("aligned", "tilted", "turned", "wrinkled")]
+    families = [f for f in shares
+                if f not in ("aligned", "tilted", "turned", "wrinkled", "spiky")]
     assert sum(shares[f] for f in families) == pytest.approx(1.0)
 
 
@@ -426,3 +431,23 @@ def test_plane_regions_put_a_bumpy_tilted_face_on_its_plane_and_keep_the_rims():
                 return np.linalg.svd(centred, full_matrices=False)[1][2] / np.sqrt(len(points))
 
             assert off_plane(out[face]) < 1e-9 < 1e-3 < off_plane(bumpy[face])
+
+
+def test_spike_rows_are_closed_rows_of_sharp_cones_as_thin_as_asked():
+    """spike_rows: a closed slab with one sharp tip per cone; thinner cones when asked; the
+    same shape for the same seed."""
+    import numpy as np
+    import trimesh
+
+    script = research_script("spike_rows")
+    for seed in (0, 2):  # seed 2 is turned
+        vertices, faces = script.spike_row(seed)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        assert abs(np.ptp(vertices, axis=0).max() - 1.0) < 1e-12
+        tips = mesh.vertex_defects > np.pi  # a cone's apex; the slab's corners have pi / 2
+        assert 3 <= tips.sum() <= 8
+        np.testing.assert_array_equal(vertices, script.spike_row(seed)[0])
+    thick = trimesh.Trimesh(*script.spike_row(0), process=False)
+    thin = trimesh.Trimesh(*script.spike_row(0, radius=(0.8, 2.0)), process=False)
+    assert thin.volume < thick.volume
