@@ -746,8 +746,13 @@ def small_turn(rng, degrees: tuple[float, float]) -> np.ndarray:
     axis = rng.normal(size=3)
     axis /= np.linalg.norm(axis)
     angle = np.radians(rng.uniform(*degrees))
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    return _rodrigues(axis, np.sin(angle), np.cos(angle))
+
+
+def _rodrigues(axis: np.ndarray, sin: float, cos: float) -> np.ndarray:
+    """(3, 3) rotation about the unit ``axis`` by the angle of that sine and cosine."""
+    k = np.cross(np.eye(3), axis)  # the cross-product matrix: k @ v == axis × v
+    return np.eye(3) + sin * k + (1 - cos) * k @ k
 
 
 def _global_transform(m: Manifold, rng, aligned: bool) -> Manifold:
@@ -887,14 +892,13 @@ SPIKE_SIDES = (3, 4, 6, 48)
 
 
 def _turn_z_to(direction: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation taking +z to the unit ``direction`` (Rodrigues about z × direction)."""
+    """(3, 3) rotation taking +z to the unit ``direction`` (about z × direction)."""
     z = np.array([0.0, 0.0, 1.0])
     axis = np.cross(z, direction)
     sin, cos = np.linalg.norm(axis), float(direction @ z)
     if sin < 1e-9:
         return np.diag([1.0, 1.0, 1.0]) if cos > 0 else np.diag([1.0, -1.0, -1.0])
-    k = np.cross(np.eye(3), axis / sin)  # the cross-product matrix of the unit axis
-    return np.eye(3) + sin * k + (1 - cos) * k @ k
+    return _rodrigues(axis / sin, sin, cos)
 
 
 def spiky_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
