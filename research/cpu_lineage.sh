@@ -24,7 +24,9 @@
 # the sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
 # distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. Stage 14: stage 10's
 # recipe with 300 shapes that grow sharp spikes added to its data (DATA_spikes, agndc train-data
-# --spikes 1.0; docs/experiments/spikes.md), checkpoints at 400 and 800. A stage is kept short
+# --spikes 1.0; docs/experiments/spikes.md), checkpoints at 400 and 800; neither helped the
+# spikes. Stage 15: stage 13's final student, which gained at every checkpoint on the validation
+# family, continued 3,000 steps on the same data at half the learning rate. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.
 #
@@ -118,6 +120,10 @@ current)
     stage spike_agndc16 --data "$data,$sheets,$spikes" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 15: stage 13's student continued on its own data at half its learning rate
+    stage student_agndc16_cont --data "${data}_distilled,${sheets}_distilled" \
+        --init "$runs/student_agndc16/final.safetensors" --model "$student_config" \
+        --steps 3000,0,0 --lr 2.5e-4 --ema 0.99 --seed 22 --val-steps 1000,2000,3000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \

@@ -14,7 +14,10 @@ moved by ``--shift`` (voxels, as ``agndc eval --shifts`` moves it). Printed per 
   (``other``). Each part is its share of the total, so the parts add up to the CD;
 * for each plane of the ground truth perpendicular to the thinnest axis with at least 1 % of its
   area (upward and downward faces apart), the median offset along the axis (voxels, positive
-  up) from its samples to the nearest output samples: ``--planes``.
+  up) from its samples to the nearest output samples: ``--planes``;
+* with ``--heights N``, the CD's parts in N equal slabs of height along ``--height-axis`` (0-2,
+  default the thinnest), lowest first, and the two directions apart (ground truth to output,
+  output to ground truth): where along a row of cones the tips lose.
 
 docs/experiments/flat-terraces.md and the README's results use it on `abc8`, `1004825` and
 `20mm-xyz-cube`.
@@ -52,6 +55,8 @@ def main() -> None:
     parser.add_argument("--shift", default="0,0,0", help="X,Y,Z sub-voxel shift of the grid")
     parser.add_argument("--samples", type=int, default=100_000)
     parser.add_argument("--planes", action="store_true")
+    parser.add_argument("--heights", type=int, default=0, help="slabs of height, 0: none")
+    parser.add_argument("--height-axis", type=int, default=None)
     args = parser.parse_args()
 
     from scipy.spatial import cKDTree
@@ -80,6 +85,12 @@ def main() -> None:
     splits = [{"up": facing > FACING, "down": facing < -FACING,
                "side": np.abs(facing) <= FACING},
               {"edge": near_edge, "flat": ~near_edge & aligned, "other": ~near_edge & ~aligned}]
+    slab_axis = axis if args.height_axis is None else args.height_axis
+    if args.heights:
+        level = gt[:, slab_axis]
+        edges = np.linspace(level.min(), level.max(), args.heights + 1)
+        slab = np.clip(np.searchsorted(edges, level, side="right") - 1, 0, args.heights - 1)
+        splits.append({f"h{k}": slab == k for k in range(args.heights)})
     height = np.round(gt[:, axis] / voxel, 2)
     planes = []  # (level, facing up): an upward and a downward face can share a level
     for up in (True, False):
@@ -101,6 +112,9 @@ def main() -> None:
             parts = region_parts(d_gt, d_out, nearest, split)
             line += " " + " ".join(f"{name} {1e5 * part:.3f}" for name, part in parts.items())
             line += " |"
+        if args.heights:
+            line += (f" gt→out {1e5 * np.mean(d_gt ** 2):.3f}"
+                     f" out→gt {1e5 * np.mean(d_out ** 2):.3f} |")
         print(line)
         if args.planes:
             for level, up, mask in planes:
