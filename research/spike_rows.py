@@ -23,7 +23,7 @@ import numpy as np
 
 #: the seed stream of these shapes (apart from the training generator's and the families')
 SEED_STREAM = 777
-#: voxels per unit length at 64³ (the voxeliser's margin counted)
+#: one voxel at 64³, in units of the longest side (the voxeliser spans it with 62)
 VOXEL = 1.0 / 62
 
 
