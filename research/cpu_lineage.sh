@@ -19,7 +19,7 @@
 # 40,000) in place of DATA: whether new shapes move what the same shapes did not (they did
 # not). Stage 12: the shipped weights on all 2,000 shapes (DATA, DATA_fresh, the sheets) at
 # a lower learning rate (3e-5), 1,200 steps, a checkpoint every 400 (its steps 400 and 800 did
-# not beat the shipped weights; it goes on after stage 13). Stage 13: agndc_fast distilled
+# not beat the shipped weights, nor did its final step 1,200). Stage 13: agndc_fast distilled
 # again, from the shipped AGNDC instead of the one before it: the teacher's vertices on DATA and
 # the sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
 # distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. Stage 14: stage 10's
