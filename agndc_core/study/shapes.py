@@ -908,11 +908,13 @@ def spiky_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     side): spires, crown points, thorns, the teeth of a printed roof. Normalised again (longest
     side 1), so a spike that sticks out past the bounding box shrinks the voxel a little.
     Deterministic in (seed, voxel); the plain shape if the union fails."""
+    from ..voxelize import triangle_cross
+
     vertices, faces = generate_shape(seed)
     body = Manifold(Mesh64(vert_properties=vertices, tri_verts=faces.astype(np.uint32)))
     corners = vertices[faces]  # (F, 3, 3)
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area = np.linalg.norm(cross, axis=1)
+    cross = triangle_cross(corners)
+    area = np.linalg.norm(cross, axis=1)  # twice the area: only its shares are used
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng((seed, attempt, 9))
         count = int(rng.integers(SPIKE_COUNT[0], SPIKE_COUNT[1] + 1))
