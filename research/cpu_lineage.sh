@@ -26,7 +26,10 @@
 # recipe with 300 shapes that grow sharp spikes added to its data (DATA_spikes, agndc train-data
 # --spikes 1.0; docs/experiments/spikes.md), checkpoints at 400 and 800; neither helped the
 # spikes. Stage 15: stage 13's final student, which gained at every checkpoint on the validation
-# family, continued 3,000 steps on the same data at half the learning rate. A stage is kept short
+# family, continued 3,000 steps on the same data at half the learning rate. Stage 16: stage 10's
+# recipe with 300 layered parts added (DATA_layered, agndc train-data --layered 1.0: caps, lids
+# and stepped plates whose layers are about a voxel thick, the dev mesh abc8's pattern),
+# checkpoints at 400 and 800; it runs before stage 15 goes on. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.
 #
@@ -118,6 +121,13 @@ current)
     spikes="${data}_spikes"
     generate "$spikes" -n 300 --seed0 50000 --spikes 1.0
     stage spike_agndc16 --data "$data,$sheets,$spikes" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 16 (before stage 15 ends): stage 10's recipe with 300 layered parts added
+    # (train-data --layered 1.0; docs/experiments/layered-parts.md)
+    layered="${data}_layered"
+    generate "$layered" -n 300 --seed0 60000 --layered 1.0
+    stage layer_agndc16 --data "$data,$sheets,$layered" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     # stage 15: stage 13's student continued on its own data at half its learning rate

@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
-# Score an AGNDC checkpoint on the generated validation family, the thin sheets and the rows of
-# spikes, on the frames a shipping decision needs (docs/training.md, "Evaluating"), and compare
-# it with the shipped weights scored the same way:
+# Score an AGNDC checkpoint on the generated validation family, the thin sheets, the rows of
+# spikes and the layered caps, on the frames a shipping decision needs (docs/training.md,
+# "Evaluating"), and compare it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/, sheets/, spikes/ and spikes_thin/ (made by `bash research/score_validation.sh
-# VAL data`: agndc val-data, 48 shapes and 24 sheets; research/spike_rows.py, 12 rows of cones
-# 2-6 and 12 of cones 0.8-2 voxels in radius at the base; ~1 min). NAME without a CHECKPOINT
-# scores the shipped weights, together with marching cubes and oracle_binary (the reference; run
-# it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 / 128 the family
-# centred, 64s / 128s on 3 shifted grids per shape, sheets / sheets_s the sheets at 64^3, spikes /
-# spikes_thin the rows of cones at 64^3. A finished frame is skipped. Results:
+# VAL holds family/, sheets/, spikes/, spikes_thin/ and caps/ (made by `bash
+# research/score_validation.sh VAL data`: agndc val-data, 48 shapes and 24 sheets;
+# research/spike_rows.py, 12 rows of cones 2-6 and 12 of cones 0.8-2 voxels in radius at the
+# base; research/layered_caps.py, 24 caps of layers about a voxel thick; ~1 min). NAME without
+# a CHECKPOINT scores the shipped weights, together with marching cubes and oracle_binary (the
+# reference; run it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 /
+# 128 the family centred, 64s / 128s on 3 shifted grids per shape, sheets / sheets_s the sheets
+# at 64^3, spikes / spikes_thin the rows of cones at 64^3, caps the layered caps at 64^3. A
+# finished frame is skipped. Results:
 # OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
 set -euo pipefail
@@ -23,6 +25,8 @@ if [[ ${2:-} == data ]]; then  # the validation data, once
         -o "$val/spikes" -n 12
     [[ -f $val/spikes_thin/MANIFEST.csv ]] || .venv/bin/python research/spike_rows.py \
         -o "$val/spikes_thin" -n 12 --radius 0.8,2
+    [[ -f $val/caps/MANIFEST.csv ]] || .venv/bin/python research/layered_caps.py \
+        -o "$val/caps" -n 24
     exit 0
 fi
 out=$2 name=$3
@@ -43,7 +47,9 @@ for frame in $frames; do
         sheets_s) args=("$val/sheets" --res 64 --shifts 3) ;;
         spikes) args=("$val/spikes" --res 64) ;;
         spikes_thin) args=("$val/spikes_thin" --res 64) ;;
-        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s spikes spikes_thin)" >&2
+        caps) args=("$val/caps" --res 64) ;;
+        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s spikes spikes_thin" \
+                "caps)" >&2
            exit 2 ;;
     esac
     dest=$out/$name/$frame

@@ -941,6 +941,108 @@ def spiky_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
+# ---------------------------------------------------------------- layered parts (training)
+
+#: layered parts (``layered_shape``): how many layers and how far each layer's outline steps in
+#: (negative: out) from the one below, in voxels of the sample's grid (the layer height comes
+#: from the recipe, ``training.data.LAYER_VOXELS``)
+LAYER_COUNT = (3, 12)
+LAYER_STEP_VOXELS = (-2.0, 6.0)
+
+
+def _star_outline(rng, segs) -> CrossSection:
+    """A random star-shaped outline with rounded corners, 1 across, centred on the origin."""
+    n = int(rng.integers(4, 12))
+    ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
+    rad = 0.5 * rng.uniform(0.55, 1.0, n)
+    section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
+    r = rng.uniform(0.01, 0.08)
+    section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
+    lo, hi = _section_box(section)
+    return section.translate(tuple(-(lo + hi) / 2)).scale(tuple(np.full(2, 1.0 / (hi - lo).max())))
+
+
+def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np.ndarray]:
+    """A shallow part built of 3-12 layers ``layer`` thick (``voxel`` and ``layer`` are
+    fractions of the longest side, which is 1 after normalisation; training asks for layers
+    about a voxel of the sample's grid thick): caps,
+    lids, knobs, stepped plates and terraced models, whose every rim, recessed floor, shelf and
+    step is one layer from the next. Each layer's outline (a disc, a rounded rectangle or a
+    random star, 1 across) steps ``LAYER_STEP_VOXELS`` in or out from the one below; then
+    recesses one or two layers deep from the top or the bottom, a slot one layer deeper across
+    a recess, a hollow from below that leaves the top three or four layers, through holes.
+    ``generate_shape`` never gives a shape this shallow nor one whose features are all a voxel
+    apart. Placement: as ``sheet_shape``. Deterministic in (seed, voxel, layer)."""
+    aligned = is_axis_aligned(seed)
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, attempt, 11))
+        segs = int(rng.integers(SEGMENTS[0], SEGMENTS[1] + 1)) * 2
+        kind = int(rng.integers(3))
+        if kind == 0:
+            base = CrossSection.circle(0.5, segs)
+        elif kind == 1:
+            h = rng.uniform(0.4, 1.0)
+            base = _rounded_rect(1.0, h, h * rng.uniform(0.02, 0.3), segs)
+        else:
+            base = _star_outline(rng, segs)
+        count = int(rng.integers(LAYER_COUNT[0], LAYER_COUNT[1] + 1))
+        inset = np.cumsum(np.where(rng.random(count) < 0.35, 0.0,
+                                   rng.uniform(*LAYER_STEP_VOXELS, count))) * voxel
+        inset -= inset.min()  # the widest layer keeps the outline
+        layers = []
+        for k in range(count):  # a dozen layers at most
+            section = base.offset(-inset[k], JoinType.Round, 2.0, segs)
+            if section.area() > 0.01:
+                layers.append(section.extrude(layer * 1.001).translate((0, 0, k * layer)))
+        if len(layers) < 2:
+            continue
+        body = Manifold.batch_boolean(layers, OpType.Add)
+        lo, hi = _bounds(body)
+        top = hi[2]
+        cuts = []
+        for _ in range(int(rng.integers(1, 4))):  # recesses from the top or the bottom
+            depth = int(rng.integers(1, 3)) * layer
+            size = rng.uniform(0.15, 0.6, 2)
+            tool = _rounded_rect(*size, size.min() * rng.uniform(0.0, 0.5), segs) \
+                if rng.random() < 0.5 else CrossSection.circle(size[0] / 2, segs)
+            point = rng.uniform(-0.2, 0.2, 2)
+            if rng.random() < 0.7:
+                cut = tool.extrude(depth + layer).translate((*point, top - depth))
+                if rng.random() < 0.6:  # a slot one layer deeper across the recess
+                    width = rng.uniform(1.5, 4.0) * voxel
+                    slot = Manifold.cube((size.max() * 0.8, width, 2 * layer), center=True)
+                    cuts.append(slot.rotate((0, 0, rng.uniform(0, 180))).translate(
+                        (*point, top - depth)))
+            else:
+                cut = tool.extrude(depth + layer).translate((*point, lo[2] - layer))
+            cuts.append(cut)
+        if rng.random() < 0.4:  # hollow from below, leaving the top two layers (the deepest
+            # recess's) and a shelf of one or two more
+            shelf = int(rng.integers(1, 3)) * layer
+            cuts.append(base.offset(-inset.max() - rng.uniform(2, 6) * voxel, JoinType.Round,
+                                    2.0, segs).extrude(top - shelf - lo[2] - layer)
+                        .translate((0, 0, lo[2] - layer)))
+        for _ in range(int(rng.integers(0, 4))):  # through holes
+            r = rng.uniform(1.0, 5.0) * voxel
+            cuts.append(Manifold.cylinder(top - lo[2] + 4 * layer, r, r, segs).translate(
+                (*rng.uniform(-0.35, 0.35, 2), lo[2] - 2 * layer)))
+        m = Manifold.batch_boolean([body, *cuts], OpType.Subtract)
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        if aligned:
+            turn = _random_rotation(rng, aligned=True)
+        elif rng.random() < 1 / 3:
+            turn = _random_rotation(rng, aligned=False)
+        else:
+            turn = small_turn(rng, (1.0, 10.0)) @ _random_rotation(rng, aligned=True)
+        affine = np.zeros((3, 4))
+        affine[:, :3] = turn
+        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
+        if _edge_manifold(faces):
+            return vertices, faces
+    return _to_arrays(Manifold.cube((1.0, 0.7, 4 * layer), center=True))
+
+
 def _section_box(section: CrossSection) -> tuple[np.ndarray, np.ndarray]:
     """(2,) min and max corners of a cross-section."""
     box = section.bounds()

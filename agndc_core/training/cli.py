@@ -27,6 +27,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--spikes", type=float, default=0.0, help="share of the samples (sheets "
                    "aside) that grow 2-10 sharp spikes 0.6-3 voxels in radius at the base, "
                    "5-25 voxels tall: spires, thorns, crown points (default 0)")
+    p.add_argument("--layered", type=float, default=0.0, help="share of the samples (sheets "
+                   "and spiky shapes aside) that are layered parts instead: caps, lids and "
+                   "stepped plates of 3-12 layers 0.8-1.4 voxels thick (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -119,7 +122,8 @@ def _cmd_data(args) -> int:
         raise AGNDCError(f"--resolutions wants LO,HI, got {args.resolutions!r}")
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds, wrinkled=args.wrinkled,
-                          sheets=args.sheets, tilted=args.tilted, spikes=args.spikes)
+                          sheets=args.sheets, tilted=args.tilted, spikes=args.spikes,
+                          layered=args.layered)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

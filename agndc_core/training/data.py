@@ -22,6 +22,7 @@ from ..labels import make_labels
 from ..study.shapes import (
     generate_shape,
     is_axis_aligned,
+    layered_shape,
     shape_family,
     sheet_shape,
     small_turn,
@@ -46,6 +47,10 @@ SHEET_VOXELS = (1.5, 4.0)
 #: about a random axis. Real parts are often modelled or scanned a few degrees off the axes;
 #: the generator gives only aligned or freely turned shapes
 TILT_DEGREES = (1.0, 15.0)
+#: layered parts (``sample_recipe(layered=...)``): the layer height in voxels of the sample's
+#: own grid (``shapes.layered_shape``: caps, lids and stepped plates whose rims, floors, shelves
+#: and steps are each about a voxel apart, which the generator's families never are)
+LAYER_VOXELS = (0.8, 1.4)
 
 
 def random_rotation(rng) -> np.ndarray:
@@ -65,7 +70,7 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
                   wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0,
-                  spikes: float = 0.0) -> dict:
+                  spikes: float = 0.0, layered: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -81,7 +86,11 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     are turned ``TILT_DEGREES`` off the axes instead (another stream of its own; the field
     ``tilt_degrees`` records the angle). ``spikes`` is the share of the samples other than
     sheets whose shape grows sharp spikes a few voxels across (``shapes.spiky_shape`` at the
-    recipe's voxel; field ``spikes``, no wrinkles), a stream of its own too. The recipe also
+    recipe's voxel; field ``spikes``, no wrinkles), a stream of its own too. ``layered`` is the
+    share of the samples other than sheets and spiky shapes that become a layered part instead
+    (``shapes.layered_shape``, layers ``LAYER_VOXELS`` thick at the recipe's resolution, family
+    "layered", field ``layer_voxels``, no wrinkles, placed by the shape function alone), from a
+    stream of its own. The recipe also
     records the shape family and whether the sample is grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
@@ -123,6 +132,15 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     if spikes > 0 and spike_rng.random() < spikes and "sheet_voxels" not in recipe:
         recipe.pop("wrinkles", None)
         recipe["spikes"] = True
+    layer_rng = np.random.default_rng([seed, 1234, 11])
+    if (layered > 0 and layer_rng.random() < layered and "sheet_voxels" not in recipe
+            and not recipe.get("spikes")):
+        # placed by layered_shape itself, as sheets are: no second turn
+        recipe.pop("wrinkles", None)
+        recipe.pop("tilt_degrees", None)
+        recipe.update(family="layered", rotation=np.eye(3).tolist(),
+                      axis_aligned=generator_aligned,
+                      layer_voxels=float(layer_rng.uniform(*LAYER_VOXELS)))
     return recipe
 
 
@@ -148,6 +166,9 @@ def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
                                       recipe["sheet_voxels"] / (recipe["resolution"] - 2))
     elif recipe.get("spikes"):
         vertices, faces = spiky_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
+    elif "layer_voxels" in recipe:
+        voxel = 1.0 / (recipe["resolution"] - 2)
+        vertices, faces = layered_shape(recipe["seed"], voxel, recipe["layer_voxels"] * voxel)
     else:
         vertices, faces = generate_shape(recipe["seed"])
     if "wrinkles" in recipe:
@@ -197,7 +218,8 @@ def _write_one(args) -> str:
 
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
                   resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
-                  sheets: float = 0.0, tilted: float = 0.0, spikes: float = 0.0) -> list[Path]:
+                  sheets: float = 0.0, tilted: float = 0.0, spikes: float = 0.0,
+                  layered: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -215,7 +237,7 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted,
-                           spikes=spikes), out_dir / f"sample_{seed:06d}.npz")
+                           spikes=spikes, layered=layered), out_dir / f"sample_{seed:06d}.npz")
             for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:

@@ -14,11 +14,13 @@ from agndc_core.study.shapes import (
     generate_dataset,
     generate_shape,
     is_axis_aligned,
+    layered_shape,
     shape_family,
     sheet_shape,
     spiky_shape,
 )
 from agndc_core.training.data import (
+    LAYER_VOXELS,
     RESOLUTION_RANGE,
     SHEET_VOXELS,
     TILT_DEGREES,
@@ -264,3 +266,44 @@ def test_spike_recipes_keep_the_other_draws_and_grow_closed_sharp_spikes():
     assert np.ptp(v, axis=0).max() == pytest.approx(1.0, abs=1e-12)
     sample = make_sample(grown[0])
     assert sample["lattice"].any()
+
+
+def test_layered_recipes_keep_the_other_draws_and_stack_layers_a_voxel_thick():
+    seeds = range(300)
+    plain = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2) for s in seeds]
+    layered = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.3)
+               for s in seeds]
+    made = [b for b in layered if "layer_voxels" in b]
+    candidates = [a for a in plain if "sheet_voxels" not in a and not a.get("spikes")]
+    assert len(made) / len(candidates) == pytest.approx(0.3, abs=0.08)
+    for a, b in zip(plain, layered):
+        if "layer_voxels" not in b:
+            assert b == a
+            continue
+        assert "sheet_voxels" not in a and not a.get("spikes") and "wrinkles" not in b
+        assert b["family"] == "layered" and LAYER_VOXELS[0] <= b["layer_voxels"] <= LAYER_VOXELS[1]
+        assert b["rotation"] == np.eye(3).tolist() and "tilt_degrees" not in b
+        assert b["axis_aligned"] == is_axis_aligned(b["seed"])
+        placement = ("family", "layer_voxels", "rotation", "axis_aligned", "tilt_degrees")
+        assert {k: v for k, v in b.items() if k not in placement} == {
+            k: v for k, v in a.items() if k not in (*placement, "wrinkles")}
+    # closed and shallow; on the grid axes every face across the stacking axis lies a whole
+    # number of layers from the lowest (the layers' 0.1 % overlap aside)
+    aligned = [r for r in made if is_axis_aligned(r["seed"])][:3]
+    assert aligned
+    for recipe in aligned:
+        vertices, faces = recipe_mesh(recipe)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        voxel = 1.0 / (recipe["resolution"] - 2)
+        layer = recipe["layer_voxels"] * voxel
+        extent = np.ptp(vertices, axis=0)
+        axis = int(np.argmin(extent))
+        assert extent[axis] <= 12 * layer * 1.01 and extent.max() == pytest.approx(1.0, abs=1e-9)
+        across = np.abs(mesh.face_normals[:, axis]) > 1 - AXIS_TOL
+        heights = (vertices[faces[across]][..., axis].ravel() - vertices[:, axis].min()) / layer
+        assert np.abs(heights - np.round(heights)).max() < 0.02
+        assert len(np.unique(np.round(heights))) >= 3
+    v, _ = layered_shape(made[0]["seed"], 1 / 62, 1 / 62)  # deterministic
+    np.testing.assert_array_equal(v, layered_shape(made[0]["seed"], 1 / 62, 1 / 62)[0])
+    assert make_sample(made[0])["lattice"].any()

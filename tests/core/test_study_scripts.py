@@ -110,8 +110,8 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
 
 
 def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
-    """data_mix: shares of family, placement, wrinkles and spikes, read back from sample
-    files."""
+    """data_mix: shares of family (layered parts among them), placement, wrinkles and spikes,
+    read back from sample files."""
     import json
 
     import numpy as np
@@ -120,7 +120,7 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     from agndc_core.training.data import sample_recipe
 
     mix = research_script("data_mix")
-    made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0, spikes=0.3)
+    made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0, spikes=0.3, layered=0.2)
             for s in range(120)]
     for recipe in made:  # only the recipe: what the script reads
         np.savez(tmp_path / f"sample_{recipe['seed']:06d}.npz", recipe=json.dumps(recipe))
@@ -134,6 +134,8 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     assert shares["tilted"] > 0.15 and shares["wrinkled"] > 0.15
     assert shares["spiky"] == pytest.approx(sum(bool(r.get("spikes")) for r in made) / 120)
     assert 0.1 < shares["spiky"] < 0.4
+    layered = sum(r["family"] == "layered" for r in made)
+    assert shares["layered"] == pytest.approx(layered / 120) and 0 < layered < 60
     assert sum(shares[p] for p in ("aligned", "tilted", "turned")) == pytest.approx(1.0)
     families = [f for f in shares
                 if f not in ("aligned", "tilted", "turned", "wrinkled", "spiky")]
@@ -451,3 +453,32 @@ def test_spike_rows_are_closed_rows_of_sharp_cones_as_thin_as_asked():
     thick = trimesh.Trimesh(*script.spike_row(0), process=False)
     thin = trimesh.Trimesh(*script.spike_row(0, radius=(0.8, 2.0)), process=False)
     assert thin.volume < thick.volume
+
+
+def test_layered_caps_are_closed_and_their_flat_faces_lie_whole_layers_apart():
+    """layered_caps: a closed shallow cap; on the grid axes every face across its thin axis
+    lies a whole number of layers from the next; some caps upside down (the skirt, the widest
+    layer, on top); thinner layers when asked; the same shape for the same seed."""
+    import numpy as np
+    import trimesh
+
+    script = research_script("layered_caps")
+    skirt_side = []
+    for seed in (0, 1, 3, 4, 6, 7, 9, 10):  # every third seed (2, 5, ...) is turned
+        vertices, faces = script.layered_cap(seed)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        extent = np.ptp(vertices, axis=0)
+        assert abs(extent.max() - 1.0) < 1e-12 and extent[2] < 0.35
+        np.testing.assert_array_equal(vertices, script.layered_cap(seed)[0])
+        across = np.abs(mesh.face_normals[:, 2]) > 1 - 1e-9
+        levels = np.unique(np.round(vertices[faces[across]][..., 2].ravel(), 9))
+        steps = np.diff(levels)
+        layer = steps.min()
+        assert 0.8 * script.VOXEL < layer < 1.35 * script.VOXEL and len(levels) >= 4
+        assert np.abs(steps / layer - np.round(steps / layer)).max() < 1e-6
+        radius = np.linalg.norm(vertices[:, :2], axis=1)
+        skirt_side.append(np.sign(vertices[radius > radius.max() - 1e-6, 2].mean()))
+    assert set(skirt_side) == {-1.0, 1.0}
+    thin = script.layered_cap(0, layer=(0.5, 0.51))[0]
+    assert np.ptp(thin[:, 2]) < np.ptp(script.layered_cap(0)[0][:, 2])
