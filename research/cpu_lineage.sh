@@ -29,7 +29,9 @@
 # family, continued 3,000 steps on the same data at half the learning rate. Stage 16: stage 10's
 # recipe with 300 layered parts added (DATA_layered, agndc train-data --layered 1.0: caps, lids
 # and stepped plates whose layers are about a voxel thick, the dev mesh abc8's pattern),
-# checkpoints at 400 and 800; it runs before stage 15 goes on. A stage is kept short
+# checkpoints at 400 and 800; it runs before stage 15 goes on (its step 400 beat the shipped
+# weights on the sheets and the centred family, level on the shifted family grids). Stage 17:
+# stage 16 with another seed (19), also before stage 15. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.
 #
@@ -130,6 +132,11 @@ current)
     stage layer_agndc16 --data "$data,$sheets,$layered" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 17 (before stage 15 ends): stage 16 again with another seed, whether its gain on
+    # the validation family and the sheets holds
+    stage layer_agndc16_seed19 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
     # stage 15: stage 13's student continued on its own data at half its learning rate
     stage student_agndc16_cont --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16/final.safetensors" --model "$student_config" \
