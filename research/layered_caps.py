@@ -19,10 +19,10 @@ turned by Euler angles along a random direction, 3-12° in all. Written as OBJ f
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
+from spike_rows import turned_arrays, write_set
 
 #: the seed stream of these shapes (apart from the training generator's and the families')
 SEED_STREAM = 1031
@@ -45,8 +45,6 @@ def layered_cap(seed: int, layer=(0.85, 1.3)) -> tuple[np.ndarray, np.ndarray]:
     """(V, 3) vertices (bounding box centred, longest side 1), (F, 3) faces of one shape; the
     layer height drawn from ``layer`` (voxels at 64³)."""
     from manifold3d import Manifold, OpType
-
-    from agndc_core.study.shapes import _to_arrays
 
     rng = np.random.default_rng((seed, SEED_STREAM))
     u = rng.uniform(*layer) * VOXEL
@@ -77,13 +75,7 @@ def layered_cap(seed: int, layer=(0.85, 1.3)) -> tuple[np.ndarray, np.ndarray]:
         shape = shape + Manifold.cylinder(u, boss_r, boss_r, segs).translate((0, 0, top - u))
     if rng.random() < 0.5:  # upside down: the recess faces down
         shape = shape.mirror((0, 0, 1))
-    if seed % 3 == 2:
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        shape = shape.rotate(tuple(axis * rng.uniform(3, 12)))
-    vertices, faces = _to_arrays(shape)
-    vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    return vertices / np.ptp(vertices, axis=0).max(), faces
+    return turned_arrays(shape, rng, seed)
 
 
 def main() -> None:
@@ -93,22 +85,8 @@ def main() -> None:
     parser.add_argument("--layer", default="0.85,1.3", help="LO,HI layer height, voxels at 64³")
     args = parser.parse_args()
 
-    from agndc_core.gridio import save_mesh
-
     layer = tuple(float(r) for r in args.layer.split(","))
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for seed in range(args.n):
-        vertices, faces = layered_cap(seed, layer)
-        name = f"cap_{seed}.obj"
-        save_mesh(vertices, faces, args.out / name)
-        rows.append({"file": name, "kind": "cad", "shape": "layered_cap", "seed": seed,
-                     "faces": len(faces)})
-    with open(args.out / "MANIFEST.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"{len(rows)} shapes in {args.out}")
+    write_set(args.out, args.n, "cap", "cad", "layered_cap", lambda seed: layered_cap(seed, layer))
 
 
 if __name__ == "__main__":

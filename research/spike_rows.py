@@ -16,7 +16,6 @@ Written as OBJ files with a ``MANIFEST.csv`` (kind ``print``) that ``agndc eval`
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -32,8 +31,6 @@ def spike_row(seed: int, radius=(2.0, 6.0)) -> tuple[np.ndarray, np.ndarray]:
     cones' base radii drawn from ``radius`` (voxels at 64³)."""
     from manifold3d import Manifold
 
-    from agndc_core.study.shapes import _to_arrays
-
     rng = np.random.default_rng((seed, SEED_STREAM))
     count = int(rng.integers(3, 9))
     thickness = rng.uniform(3, 8) * VOXEL
@@ -48,6 +45,14 @@ def spike_row(seed: int, radius=(2.0, 6.0)) -> tuple[np.ndarray, np.ndarray]:
         if rng.random() < 0.5:
             cone = cone.mirror((0, 0, 1))  # pointing down from the slab's lower face
         shape = shape + cone
+    return turned_arrays(shape, rng, seed)
+
+
+def turned_arrays(shape, rng, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(V, 3) vertices (bounding box centred, longest side 1), (F, 3) faces of a manifold;
+    every third seed's turned first by Euler angles along a random direction, 3-12° in all."""
+    from agndc_core.study.shapes import _to_arrays
+
     if seed % 3 == 2:
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
@@ -57,6 +62,18 @@ def spike_row(seed: int, radius=(2.0, 6.0)) -> tuple[np.ndarray, np.ndarray]:
     return vertices / np.ptp(vertices, axis=0).max(), faces
 
 
+def write_set(out: Path, count: int, prefix: str, kind: str, shape: str, build) -> None:
+    """``count`` meshes ``build(seed)`` as ``out/PREFIX_SEED.obj`` with a ``MANIFEST.csv`` of
+    class ``kind`` that ``agndc eval`` reads."""
+    from agndc_core.study.validation import save_shape, write_manifest
+
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [save_shape(out, f"{prefix}_{seed}.obj", kind, shape, seed, *build(seed))
+            for seed in range(count)]
+    write_manifest(out, rows)
+    print(f"{len(rows)} shapes in {out}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-o", "--out", type=Path, required=True)
@@ -64,22 +81,9 @@ def main() -> None:
     parser.add_argument("--radius", default="2,6", help="LO,HI base radius, voxels at 64³")
     args = parser.parse_args()
 
-    from agndc_core.gridio import save_mesh
-
     radius = tuple(float(r) for r in args.radius.split(","))
-    args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for seed in range(args.n):
-        vertices, faces = spike_row(seed, radius)
-        name = f"spikes_{seed}.obj"
-        save_mesh(vertices, faces, args.out / name)
-        rows.append({"file": name, "kind": "print", "shape": "spike_row", "seed": seed,
-                     "faces": len(faces)})
-    with open(args.out / "MANIFEST.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"{len(rows)} shapes in {args.out}")
+    write_set(args.out, args.n, "spikes", "print", "spike_row",
+              lambda seed: spike_row(seed, radius))
 
 
 if __name__ == "__main__":

@@ -827,6 +827,38 @@ def generate_shape(seed: int) -> tuple[np.ndarray, np.ndarray]:
 # ---------------------------------------------------------------- thin sheets (training)
 
 
+def _place_flat_part(rng, m: Manifold, aligned: bool):
+    """A sheet's or a layered part's placement: on the grid axes (a signed axis permutation) if
+    ``aligned``, otherwise turned 1-10° off them or, for a third, freely. Normalised (V, 3),
+    (F, 3) arrays, or None when the result is not edge-manifold (the caller draws again)."""
+    if aligned:
+        turn = _random_rotation(rng, aligned=True)
+    elif rng.random() < 1 / 3:
+        turn = _random_rotation(rng, aligned=False)
+    else:
+        turn = small_turn(rng, (1.0, 10.0)) @ _random_rotation(rng, aligned=True)
+    affine = np.zeros((3, 4))
+    affine[:, :3] = turn
+    vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
+    return (vertices, faces) if _edge_manifold(faces) else None
+
+
+def _star_outline(rng, segs, min_radius: float, centred: bool = True) -> CrossSection:
+    """A random star-shaped outline with rounded corners, 1 across: 4-11 corners at
+    ``min_radius``-1 of the largest radius, about the origin (``centred``: its bounding box's
+    centre moved there)."""
+    n = int(rng.integers(4, 12))
+    ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
+    rad = 0.5 * rng.uniform(min_radius, 1.0, n)
+    section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
+    r = rng.uniform(0.01, 0.08)
+    section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
+    lo, hi = _section_box(section)
+    if centred:
+        section = section.translate(tuple(-(lo + hi) / 2))
+    return section.scale(tuple(np.full(2, 1.0 / (hi - lo).max())))
+
+
 def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     """A flat plate ``thickness`` thick (a fraction of its longest side, which is 1 after
     normalisation): a random star-shaped outline with rounded corners, 1 across, minus 0-6
@@ -841,15 +873,7 @@ def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng((seed, attempt, 5))
         segs = int(rng.integers(SEGMENTS[0], SEGMENTS[1] + 1))
-        n = int(rng.integers(4, 12))
-        ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
-        rad = 0.5 * rng.uniform(0.45, 1.0, n)
-        section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
-        r = rng.uniform(0.01, 0.08)
-        section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
-        lo2, hi2 = _section_box(section)
-        section = section.scale(tuple(np.full(2, 1.0 / (hi2 - lo2).max())))  # 1 across
-        body = section.extrude(thickness)
+        body = _star_outline(rng, segs, 0.45, centred=False).extrude(thickness)
         lo, hi = _bounds(body)
         cuts = []
         for _ in range(int(rng.integers(0, 7))):
@@ -866,17 +890,9 @@ def sheet_shape(seed: int, thickness: float) -> tuple[np.ndarray, np.ndarray]:
         m = Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
         if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
             continue
-        if aligned:
-            turn = _random_rotation(rng, aligned=True)
-        elif rng.random() < 1 / 3:
-            turn = _random_rotation(rng, aligned=False)
-        else:
-            turn = small_turn(rng, (1.0, 10.0)) @ _random_rotation(rng, aligned=True)
-        affine = np.zeros((3, 4))
-        affine[:, :3] = turn
-        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
-        if _edge_manifold(faces):
-            return vertices, faces
+        placed = _place_flat_part(rng, m, aligned)
+        if placed is not None:
+            return placed
     return _to_arrays(Manifold.cube((1.0, 0.7, thickness), center=True))
 
 
@@ -950,16 +966,6 @@ LAYER_COUNT = (3, 12)
 LAYER_STEP_VOXELS = (-2.0, 6.0)
 
 
-def _star_outline(rng, segs) -> CrossSection:
-    """A random star-shaped outline with rounded corners, 1 across, centred on the origin."""
-    n = int(rng.integers(4, 12))
-    ang = (np.arange(n) + rng.uniform(-0.4, 0.4, n)) * 2 * np.pi / n
-    rad = 0.5 * rng.uniform(0.55, 1.0, n)
-    section = CrossSection([rad[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])])
-    r = rng.uniform(0.01, 0.08)
-    section = section.offset(-r, JoinType.Round, 2.0, segs).offset(r, JoinType.Round, 2.0, segs)
-    lo, hi = _section_box(section)
-    return section.translate(tuple(-(lo + hi) / 2)).scale(tuple(np.full(2, 1.0 / (hi - lo).max())))
 
 
 def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np.ndarray]:
@@ -984,7 +990,7 @@ def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np
             h = rng.uniform(0.4, 1.0)
             base = _rounded_rect(1.0, h, h * rng.uniform(0.02, 0.3), segs)
         else:
-            base = _star_outline(rng, segs)
+            base = _star_outline(rng, segs, 0.55)
         count = int(rng.integers(LAYER_COUNT[0], LAYER_COUNT[1] + 1))
         inset = np.cumsum(np.where(rng.random(count) < 0.35, 0.0,
                                    rng.uniform(*LAYER_STEP_VOXELS, count))) * voxel
@@ -1029,17 +1035,9 @@ def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np
         m = Manifold.batch_boolean([body, *cuts], OpType.Subtract)
         if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
             continue
-        if aligned:
-            turn = _random_rotation(rng, aligned=True)
-        elif rng.random() < 1 / 3:
-            turn = _random_rotation(rng, aligned=False)
-        else:
-            turn = small_turn(rng, (1.0, 10.0)) @ _random_rotation(rng, aligned=True)
-        affine = np.zeros((3, 4))
-        affine[:, :3] = turn
-        vertices, faces = _to_arrays(_drop_slivers(m.transform(affine)))
-        if _edge_manifold(faces):
-            return vertices, faces
+        placed = _place_flat_part(rng, m, aligned)
+        if placed is not None:
+            return placed
     return _to_arrays(Manifold.cube((1.0, 0.7, 4 * layer), center=True))
 
 

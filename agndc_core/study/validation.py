@@ -460,14 +460,27 @@ def validation_sheet(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
 FAMILIES = {"main": validation_shape, "sheets": validation_sheet}
 
 
-def _write_one(args) -> dict:
-    seed, out, family = args
+def save_shape(out, file: str, kind: str, shape: str, seed: int, vertices, faces) -> dict:
+    """Write one mesh of a scored set as ``out/file``; its ``MANIFEST.csv`` row."""
     from ..gridio import save_mesh
 
+    save_mesh(vertices, faces, Path(out) / file)
+    return {"file": file, "kind": kind, "shape": shape, "seed": seed, "faces": len(faces)}
+
+
+def write_manifest(out, rows: list[dict]) -> None:
+    """``out/MANIFEST.csv`` (file, kind, shape, seed, faces): the classes ``agndc eval``
+    reports by."""
+    with open(Path(out) / "MANIFEST.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def _write_one(args) -> dict:
+    seed, out, family = args
     kind, name, vertices, faces = FAMILIES[family](seed)
-    path = f"val_{seed}.obj"
-    save_mesh(vertices, faces, Path(out) / path)
-    return {"file": path, "kind": kind, "shape": name, "seed": seed, "faces": len(faces)}
+    return save_shape(out, f"val_{seed}.obj", kind, name, seed, vertices, faces)
 
 
 def write_family(out, n: int, seed0: int | None = None, workers: int = 2,
@@ -489,8 +502,5 @@ def write_family(out, n: int, seed0: int | None = None, workers: int = 2,
             rows = pool.map(_write_one, jobs)
     else:
         rows = [_write_one(job) for job in jobs]
-    with open(out / "MANIFEST.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_manifest(out, rows)
     return rows
