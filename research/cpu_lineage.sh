@@ -30,7 +30,7 @@
 # recipe with 300 layered parts added (DATA_layered, agndc train-data --layered 1.0: caps, lids
 # and stepped plates whose layers are about a voxel thick, the dev mesh abc8's pattern),
 # checkpoints at 400 and 800; it runs before stage 15 goes on (its step 400 beat the shipped
-# weights on the sheets and the centred family, level on the shifted family grids). Stage 17:
+# weights on the centred sheets and family, level on their shifted grids). Stage 17:
 # stage 16 with another seed (19), also before stage 15. A stage is kept short
 # (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
 # machine starts the stage again.

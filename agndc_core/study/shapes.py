@@ -966,19 +966,17 @@ LAYER_COUNT = (3, 12)
 LAYER_STEP_VOXELS = (-2.0, 6.0)
 
 
-
-
 def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np.ndarray]:
     """A shallow part built of 3-12 layers ``layer`` thick (``voxel`` and ``layer`` are
     fractions of the longest side, which is 1 after normalisation; training asks for layers
-    about a voxel of the sample's grid thick): caps,
-    lids, knobs, stepped plates and terraced models, whose every rim, recessed floor, shelf and
-    step is one layer from the next. Each layer's outline (a disc, a rounded rectangle or a
-    random star, 1 across) steps ``LAYER_STEP_VOXELS`` in or out from the one below; then
-    recesses one or two layers deep from the top or the bottom, a slot one layer deeper across
-    a recess, a hollow from below that leaves the top three or four layers, through holes.
-    ``generate_shape`` never gives a shape this shallow nor one whose features are all a voxel
-    apart. Placement: as ``sheet_shape``. Deterministic in (seed, voxel, layer)."""
+    about a voxel of the sample's grid thick): caps, lids, knobs, stepped plates and terraced
+    models, whose every rim, recessed floor, shelf and step is one layer from the next. Each
+    layer's outline (a disc, a rounded rectangle or a random star, 1 across) steps
+    ``LAYER_STEP_VOXELS`` in or out from the one below; then recesses one or two layers deep
+    from the top or the bottom, a slot one layer deeper across a recess, a hollow from below
+    that leaves the top three or four layers, through holes. ``generate_shape`` never gives a
+    shape this shallow nor one whose features are all a voxel apart. Placement: as
+    ``sheet_shape``. Deterministic in (seed, voxel, layer)."""
     aligned = is_axis_aligned(seed)
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng((seed, attempt, 11))

@@ -90,8 +90,8 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     share of the samples other than sheets and spiky shapes that become a layered part instead
     (``shapes.layered_shape``, layers ``LAYER_VOXELS`` thick at the recipe's resolution, family
     "layered", field ``layer_voxels``, no wrinkles, placed by the shape function alone), from a
-    stream of its own. The recipe also
-    records the shape family and whether the sample is grid-aligned.
+    stream of its own. The recipe also records the shape family and whether the sample is
+    grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
