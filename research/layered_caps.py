@@ -67,7 +67,7 @@ def layered_cap(seed: int, layer=(0.85, 1.3)) -> tuple[np.ndarray, np.ndarray]:
     if rng.random() < 0.5:  # hollow from below up to a shelf 1-2 layers thick
         shelf = int(rng.integers(1, 3)) * u
         hollow_r = recess_r * rng.uniform(0.6, 0.9)
-        cuts.append(_outline(round_shape, hollow_r, top - u - shelf + u, segs).translate(
+        cuts.append(_outline(round_shape, hollow_r, top - shelf, segs).translate(
             (0, 0, -u)))
     shape = shape - Manifold.batch_boolean(cuts, OpType.Add)
     if rng.random() < 0.4:  # a boss one layer high in the middle of the floor

@@ -57,9 +57,7 @@ def turned_arrays(shape, rng, seed: int) -> tuple[np.ndarray, np.ndarray]:
         axis = rng.normal(size=3)
         axis /= np.linalg.norm(axis)
         shape = shape.rotate(tuple(axis * rng.uniform(3, 12)))
-    vertices, faces = _to_arrays(shape)
-    vertices = vertices - (vertices.min(axis=0) + vertices.max(axis=0)) / 2
-    return vertices / np.ptp(vertices, axis=0).max(), faces
+    return _to_arrays(shape)  # centred, longest side 1
 
 
 def write_set(out: Path, count: int, prefix: str, kind: str, shape: str, build) -> None:
