@@ -145,8 +145,9 @@ def _add_remesh_options(p) -> None:
     p.add_argument("--no-flat-patches", dest="flat_patches", action="store_false",
                    help="learned methods: keep the network's raw vertices on flat voxel faces "
                         "(by default each flat patch that is not a terrace of a slanted or "
-                        "curved surface is given one depth, and the terraces of a slightly "
-                        "tilted plane one plane, so flat faces come out flat)")
+                        "curved surface is given one depth, the terraces of a slightly "
+                        "tilted plane one plane, and a recessed floor or plateau the network "
+                        "sees flat the middle of its layer, so flat faces come out flat)")
     _add_normal_filter_option(p)
     p.add_argument("--no-source-bounds", dest="source_bounds", action="store_false",
                    help="mesh input, dual methods: use the voxel grid alone (by default the "

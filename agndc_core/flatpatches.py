@@ -282,10 +282,12 @@ def _pure_splits_last(points: np.ndarray, lower_inside: bool) -> np.ndarray:
     return column[:-1, :-1] & column[1:, :-1] & column[:-1, 1:] & column[1:, 1:]
 
 
-def terrace_patches(split: np.ndarray, patches: np.ndarray, count: int) -> np.ndarray:
+def terrace_patches(split: np.ndarray, patches: np.ndarray, count: int,
+                    reach: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(count + 1,) bool: the patches with a pure split of the same kind one layer up or down
-    within ``tol.terrace_reach`` cells in the plane (index 0, no patch, is False)."""
-    below, above = step_reach(split)
+    within ``tol.terrace_reach`` cells in the plane (index 0, no patch, is False). ``reach``:
+    ``step_reach(split)`` where the caller has it already."""
+    below, above = step_reach(split) if reach is None else reach
     terrace = np.zeros(count + 1, dtype=bool)
     terrace[patches[split & (below | above)]] = True
     terrace[0] = False
@@ -301,6 +303,91 @@ def step_reach(split: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     below[..., 1:] = near[..., :-1]
     above[..., :-1] = near[..., 1:]
     return below, above
+
+
+def flatten_stepped_floors(lattice: np.ndarray, vertex: np.ndarray, *,
+                           in_place: bool = False, pinned: np.ndarray | None = None
+                           ) -> np.ndarray:
+    """Flatten the terraces that a step surrounds: a floor one layer below its rim, a plateau
+    one layer above its ledge.
+
+    Such a patch is a terrace (a pure split one layer away lies within reach), so
+    ``flatten_patches`` leaves it to the network, and ``fit_terraced_planes`` takes it only
+    when it is part of a plane. Where several one-layer steps lie a few cells apart (a cap's
+    rim, recess and slot), the network reads them as a plane a few degrees off the axis, which
+    gives the same grid, and places the floor up to half a voxel off
+    (docs/experiments/layered-parts.md). A plane's steps are its straight contour lines; a
+    floor's step runs round it. So a terrace patch that no earlier stage pinned is flattened
+    when, with at least ``tol.floor_cells`` cells, the network's coordinates along its axis are
+    flat (standard deviation at most ``tol.floor_flatness``), its cells next to the steps up or
+    those next to the steps down are not on one line (``step_roundness`` at least
+    ``tol.floor_roundness``), and their mean lies at least ``tol.floor_offset`` voxels from the
+    midpoint (where the network's depth is near it, it was measured as good). The patch takes
+    the depth ``flatten_patches`` gives a patch of its layer.
+
+    Args and returns as ``flatten_patches`` (``pinned``, when given, is read too: a patch with
+    a pinned coordinate is left alone).
+    """
+    lattice = np.asarray(lattice, dtype=bool)
+    out = vertex if in_place else np.array(vertex, copy=True)
+    for axis in range(3):
+        by_mean = mean_depth_layers(lattice, axis)
+        points = np.moveaxis(lattice, axis, -1)  # split axis last
+        coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
+        pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        for lower_inside in KINDS:
+            _flatten_floors_of_kind(points, coord, lower_inside, by_mean[lower_inside], pin)
+    return out
+
+
+def _flatten_floors_of_kind(points, coord, lower_inside: bool, by_mean: np.ndarray,
+                            pin=None) -> None:
+    """``flatten_stepped_floors`` for the patches of one kind along one axis, in place (the
+    arguments as ``_flatten_slab``'s, over the whole axis)."""
+    split = _pure_splits_last(points, lower_inside)
+    patches, count = ndimage.label(split, _IN_PLANE)
+    if count == 0:
+        return
+    below, above = step_reach(split)
+    terrace = terrace_patches(split, patches, count, (below, above))
+    terrace &= np.maximum(step_roundness(patches, split & below, count),
+                          step_roundness(patches, split & above, count)) >= tol.floor_roundness
+    cells = np.nonzero(split & terrace[patches])
+    patch_of = patches[cells]
+    values = coord[cells]
+    size = np.bincount(patch_of, minlength=count + 1)
+    mean = patch_depths(patch_of, values, count)
+    square = np.bincount(patch_of, values * values, count + 1) / np.maximum(size, 1)
+    spread = np.sqrt(np.maximum(square - mean * mean, 0.0))
+    floor = (size >= tol.floor_cells) & (spread <= tol.floor_flatness) \
+        & (np.abs(mean - MIDPOINT) >= tol.floor_offset)
+    if pin is not None:
+        floor &= np.bincount(patch_of, pin[cells], count + 1) == 0
+    keep = floor[patch_of]
+    cells = tuple(c[keep] for c in cells)
+    coord[cells] = np.where(by_mean[cells[2]], mean[patch_of[keep]], MIDPOINT)
+    if pin is not None:
+        pin[cells] = True
+
+
+def step_roundness(patches: np.ndarray, step_cells: np.ndarray, count: int) -> np.ndarray:
+    """(count + 1,) float: per patch label, the ratio of the minor to the major spread
+    (standard deviation along their principal axes) of its ``step_cells`` (those near a step
+    one way, ``step_reach``) in the patch's plane: 0 for cells along one straight line (a tilted
+    plane's step), 1 for cells round a floor or a plateau, 0 where no step is near."""
+    index = np.nonzero(step_cells)
+    label = patches[index]
+    u, v = (c.astype(np.float64) for c in index[:2])
+    n = np.bincount(label, minlength=count + 1).astype(np.float64)
+    safe = np.maximum(n, 1.0)
+    mu, mv = np.bincount(label, u, count + 1) / safe, np.bincount(label, v, count + 1) / safe
+    cuu = np.bincount(label, u * u, count + 1) / safe - mu * mu
+    cvv = np.bincount(label, v * v, count + 1) / safe - mv * mv
+    cuv = np.bincount(label, u * v, count + 1) / safe - mu * mv
+    half_trace, det = (cuu + cvv) / 2, cuu * cvv - cuv * cuv
+    gap = np.sqrt(np.maximum(half_trace * half_trace - det, 0.0))
+    major, minor = half_trace + gap, np.maximum(half_trace - gap, 0.0)
+    return np.where(n > 0, np.sqrt(minor / np.maximum(major, 1e-12)), 0.0)
 
 
 def flatten_patches_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.ndarray:
@@ -363,17 +450,7 @@ def _patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
 def _all_patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
     """Yield (patch, whether it is a terrace) for each patch of one axis and kind."""
     cells = [n - 1 for n in lattice.shape]
-
-    def is_split(cell):
-        if any(not 0 <= cell[a] < cells[a] for a in range(3)):
-            return False
-        for corner in itertools.product((0, 1), repeat=3):
-            point = tuple(cell[a] + corner[a] for a in range(3))
-            should_be_inside = (corner[axis] == 0) == lower_inside
-            if lattice[point] != should_be_inside:
-                return False
-        return True
-
+    is_split = _split_test_naive(lattice, axis, lower_inside)
     in_plane = [a for a in range(3) if a != axis]
     seen = set()
     for start in itertools.product(*(range(n) for n in cells)):
@@ -394,20 +471,75 @@ def _all_patches_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
         yield patch, _is_terrace_naive(patch, axis, in_plane, is_split)
 
 
+def _split_test_naive(lattice: np.ndarray, axis: int, lower_inside: bool):
+    """A function telling whether a cell (a tuple) is a pure split of the kind along ``axis``."""
+    cells = [n - 1 for n in lattice.shape]
+
+    def is_split(cell):
+        if any(not 0 <= cell[a] < cells[a] for a in range(3)):
+            return False
+        for corner in itertools.product((0, 1), repeat=3):
+            point = tuple(cell[a] + corner[a] for a in range(3))
+            should_be_inside = (corner[axis] == 0) == lower_inside
+            if lattice[point] != should_be_inside:
+                return False
+        return True
+
+    return is_split
+
+
 def _is_terrace_naive(patch, axis, in_plane, is_split) -> bool:
+    return any(_steps_near_naive(cell, axis, in_plane, is_split, layer)
+               for cell in patch for layer in (-1, 1))
+
+
+def _steps_near_naive(cell, axis, in_plane, is_split, layer: int) -> bool:
+    """Whether a pure split lies ``layer`` (-1 or 1) layers away within reach in the plane."""
     reach = tol.terrace_reach
-    for cell in patch:
-        for da, db in itertools.product(range(-reach, reach + 1), repeat=2):
-            if abs(da) + abs(db) > reach:  # the in-plane dilation reaches a diamond
-                continue
-            for layer in (-1, 1):
-                other = list(cell)
-                other[in_plane[0]] += da
-                other[in_plane[1]] += db
-                other[axis] += layer
-                if is_split(tuple(other)):
-                    return True
+    for da, db in itertools.product(range(-reach, reach + 1), repeat=2):
+        if abs(da) + abs(db) > reach:  # the in-plane dilation reaches a diamond
+            continue
+        other = list(cell)
+        other[in_plane[0]] += da
+        other[in_plane[1]] += db
+        other[axis] += layer
+        if is_split(tuple(other)):
+            return True
     return False
+
+
+def flatten_stepped_floors_naive(lattice: np.ndarray, vertex: np.ndarray,
+                                 pinned: np.ndarray | None = None) -> np.ndarray:
+    """Patch-by-patch reference of ``flatten_stepped_floors`` (slow): a flood fill per patch,
+    the spread of its step cells from their covariance matrix's eigenvalues."""
+    lattice = np.asarray(lattice, dtype=bool)
+    out = np.array(vertex, dtype=np.float64, copy=True)
+    for axis, lower_inside in itertools.product(range(3), KINDS):
+        in_plane = [a for a in range(3) if a != axis]
+        is_split = _split_test_naive(lattice, axis, lower_inside)
+        by_mean = mean_depth_layers(lattice, axis)[lower_inside]
+        for patch, terrace in _all_patches_naive(lattice, axis, lower_inside):
+            if not terrace or len(patch) < tol.floor_cells:
+                continue
+            if pinned is not None and any(pinned[cell][axis] for cell in patch):
+                continue
+            roundness = 0.0
+            for layer in (-1, 1):
+                near = [[cell[a] for a in in_plane] for cell in patch
+                        if _steps_near_naive(cell, axis, in_plane, is_split, layer)]
+                if near:
+                    spread = np.linalg.eigvalsh(np.cov(np.array(near, float).T, bias=True))
+                    spread = np.maximum(spread, 0.0)
+                    roundness = max(roundness, float(np.sqrt(spread[0] / max(spread[1],
+                                                                              1e-12))))
+            depths = np.array([out[cell][axis] for cell in patch])
+            if (roundness < tol.floor_roundness or depths.std() > tol.floor_flatness
+                    or abs(depths.mean() - MIDPOINT) < tol.floor_offset):
+                continue
+            value = depths.mean() if by_mean[patch[0][axis]] else MIDPOINT
+            for cell in patch:
+                out[cell][axis] = value
+    return out
 
 
 def fit_terraced_planes(lattice: np.ndarray, vertex: np.ndarray, *, in_place: bool = False,

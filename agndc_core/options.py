@@ -31,8 +31,10 @@ class RemeshOptions:
         threads: CPU threads of the network; None = every core this process may use.
         tile: lattice tile edge for large grids (learned methods); None = automatic.
         flat_patches: learned methods: each flat voxel-face patch that is not a terrace gets
-            one depth, and the terraces of a slightly tilted plane one plane
-            (``flatpatches.py``), so flat faces come out flat.
+            one depth, the terraces of a slightly tilted plane one plane, and a terrace that a
+            step runs round (a recessed floor, a plateau) the middle of its layer where the
+            network sees it flat but off that middle (``flatpatches.py``), so flat faces come
+            out flat.
         normal_filter: learned methods: denoise the mesh keeping its creases
             (``normalfilter.py``).
         source_bounds: dual methods on a voxelised mesh: the faces that bound the shape lie on

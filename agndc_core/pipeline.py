@@ -67,6 +67,8 @@ TARGET_TOLERANCE = 1.0
 
 #: fit the terraces of slightly tilted planes with one plane each (flatpatches.py)
 TERRACED_PLANES = True
+#: flatten the terraces a step runs round, recessed floors and plateaus (flatpatches.py)
+STEPPED_FLOORS = True
 #: Taubin smoothing passes of "mc_taubin" (trimesh alternates them: shrink by lambda, then
 #: inflate by nu, so 10 is 5 of each)
 TAUBIN_ITERATIONS = 10
@@ -117,6 +119,7 @@ def planned_stages(options: RemeshOptions, *, bounded: bool = False) -> list[str
                  "predict" if learned else "intersection vertices"]
         if learned and options.flat_patches:
             names += ["flat patches"] + (["terraced planes"] if TERRACED_PLANES else [])
+            names += ["stepped floors"] if STEPPED_FLOORS else []
         if options.source_bounds and method in BOUNDED_METHODS and bounded:
             names.append("source bounds")
         names.append("dual contouring")
@@ -213,15 +216,20 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
             vertex = stages.run(name, _predict, method, lattice, labels, checkpoint, threads,
                                 device, tile, stages.sub(name), cancel, reframe)
         # where the flat-patch and bounds stages place a coordinate, the normal filter keeps it
+        # (and the stepped floors leave the terraces a plane took)
         filtered = "normal filter" in planned  # a network's mesh
-        pinned = np.zeros(vertex.shape, dtype=bool) if filtered else None
+        pinned = (np.zeros(vertex.shape, dtype=bool)
+                  if filtered or "stepped floors" in planned else None)
         if "flat patches" in planned:  # a network's vertices
-            from .flatpatches import fit_terraced_planes, flatten_patches
+            from .flatpatches import fit_terraced_planes, flatten_patches, flatten_stepped_floors
 
             vertex = stages.run("flat patches", flatten_patches, lattice, vertex,
                                 in_place=True, pinned=pinned)
             if "terraced planes" in planned:
                 vertex = stages.run("terraced planes", fit_terraced_planes, lattice, vertex,
+                                    in_place=True, pinned=pinned)
+            if "stepped floors" in planned:
+                vertex = stages.run("stepped floors", flatten_stepped_floors, lattice, vertex,
                                     in_place=True, pinned=pinned)
         if "source bounds" in planned:
             vertex = stages.run("source bounds", _snap_to_source_bounds, grid, lattice, vertex,

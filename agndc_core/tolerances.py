@@ -40,6 +40,19 @@ class Tolerances:
     # passes of alternating projections that move a terraced surface's least-squares plane
     # into its cells' layers (flatpatches._into_layers)
     terrace_projections: int = 100
+    # a terrace that a step surrounds (a recessed floor, a plateau on a ledge) goes to its
+    # layer's midpoint (flatpatches.flatten_stepped_floors) when the network sees it flat: its
+    # coordinates have at most this standard deviation, in voxels...
+    floor_flatness: float = 0.08
+    # ... its cells next to the steps up, or those next to the steps down, spread at least this
+    # ratio across their main direction (a tilted plane's steps are straight lines: ~0)...
+    floor_roundness: float = 0.3
+    # ... and their mean lies at least this many voxels from the midpoint; with at least
+    # floor_cells cells. Chosen on the validation family, its thin sheets and layered caps at
+    # 64³ (0.1 and 0.15 tie on the caps, 0.15 is level on the family; with no offset bound a
+    # large face whose network depth was right moved; docs/experiments/layered-parts.md)
+    floor_offset: float = 0.15
+    floor_cells: int = 16
     # quad output (quads.py): two triangles of a dual-contouring quad are joined when each far
     # vertex lies within this many voxels of the other triangle's plane
     quad_planar: float = 0.05

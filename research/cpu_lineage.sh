@@ -2,38 +2,34 @@
 # The background CPU lineage: the best recipe continued on one thread at the lowest priority,
 # resumable at any moment. Run it again to go on where it stopped (each stage resumes
 # bit-exactly from its state shards, saved every 100 steps; a finished stage is skipped):
-#   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] [current|history|undc] > lineage.log 2>&1 &
+#   nohup nice -n 19 bash research/cpu_lineage.sh [DATA] [RUNS] [current|concluded|history|undc] \
+#       > lineage.log 2>&1 &
 #
-# current (the default): the stage that continues the shipped AGNDC, so a machine that has only
-# the repository starts where the lineage stands. Stage 8: the shipped weights continued 800
-# steps on DATA, the thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned
-# ones are turned 1-15 degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at
-# stage 5's learning rate 1e-4 and EMA 0.99, a checkpoint at 400 and 800 to score on the
-# validation family. Stage 9: stage 8's final weights continued 800 steps on the same data at
-# half its learning rate and a slower EMA (0.995). Neither beat the shipped weights on the
-# validation family (docs/experiments/sheet-training.md). Stage 10: the shipped weights
-# continued on their own recipe (stage 6's data, DATA and the sheets, learning rate 5e-5, EMA
-# 0.995) with a new seed, a checkpoint at 400 and 800: how far a continuation of the recipe
-# moves the validation score (it wanders about the shipped weights, docs/experiments/
-# sheet-training.md). Stage 11: the same, with 900 new training shapes (DATA_fresh, seeds from
-# 40,000) in place of DATA: whether new shapes move what the same shapes did not (they did
-# not). Stage 12: the shipped weights on all 2,000 shapes (DATA, DATA_fresh, the sheets) at
-# a lower learning rate (3e-5), 1,200 steps, a checkpoint every 400 (its steps 400 and 800 did
-# not beat the shipped weights, nor did its final step 1,200). Stage 13: agndc_fast distilled
-# again, from the shipped AGNDC instead of the one before it: the teacher's vertices on DATA and
-# the sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
-# distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. Stage 14: stage 10's
-# recipe with 300 shapes that grow sharp spikes added to its data (DATA_spikes, agndc train-data
-# --spikes 1.0; docs/experiments/spikes.md), checkpoints at 400 and 800; neither helped the
-# spikes. Stage 15: stage 13's final student, which gained at every checkpoint on the validation
-# family, continued 3,000 steps on the same data at half the learning rate. Stage 16: stage 10's
-# recipe with 300 layered parts added (DATA_layered, agndc train-data --layered 1.0: caps, lids
-# and stepped plates whose layers are about a voxel thick, the dev mesh abc8's pattern),
-# checkpoints at 400 and 800; it runs before stage 15 goes on (its step 400 beat the shipped
-# weights on the centred sheets and family, level on their shifted grids). Stage 17:
-# stage 16 with another seed (19), also before stage 15. A stage is kept short
-# (80-120 min where a step takes ~6 s), since only its run folder carries its state: a new
-# machine starts the stage again.
+# Only a stage's run folder carries its state: a new machine starts a stage again from its
+# start and, the stage being seeded, draws the same crops and reaches the same weights. So
+# `current` (the default) holds only the stages whose verdict is open, and a machine that has
+# only the repository starts on them. Stage 16: stage 10's recipe (the shipped weights continued
+# on DATA and the 200 thin sheets at 5e-5, EMA 0.995) with 300 layered parts added (DATA_layered,
+# agndc train-data --layered 1.0: caps, lids and stepped plates whose layers are about a voxel
+# thick, the dev mesh abc8's pattern), checkpoints at 400 and 800; its step 400 beat the shipped
+# weights on the centred sheets and family, level on their shifted grids. Stage 17: stage 16 with
+# another seed (19); the two steps 400 are also averaged weight by weight
+# (docs/experiments/layered-parts.md). Stage 13: agndc_fast distilled again from the shipped
+# AGNDC: the teacher's vertices on DATA and the sheets (agndc distil-data), then the student's
+# recipe (docs/training.md, "agndc_fast, distilled"), checkpoints at 1,000, 2,000 and 3,000
+# finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
+# at half the learning rate. A stage is kept short (80-120 min where a step takes ~6 s).
+#
+# concluded: the stages of the current lineage whose verdict is in, none of which beat the
+# shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
+# DATA, the thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned ones are
+# turned 1-15 degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at 1e-4 and
+# EMA 0.99. Stage 9: stage 8's final weights continued 800 steps at half its learning rate and
+# EMA 0.995 (docs/experiments/sheet-training.md). Stage 10: the shipped weights continued on
+# their own recipe with a new seed (it wanders about the shipped weights). Stage 11: the same
+# with 900 new training shapes (DATA_fresh, seeds from 40,000) in place of DATA. Stage 12: the
+# shipped weights on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with
+# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -93,6 +89,34 @@ tilted="${data}_tilted"
 
 case $which in
 current)
+    # the stages whose verdict is open, so that a machine with only the repository starts
+    # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
+    # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues) and 15
+    generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
+    layered="${data}_layered"
+    generate "$layered" -n 300 --seed0 60000 --layered 1.0
+    # stage 16: stage 10's recipe with 300 layered parts added (train-data --layered 1.0)
+    stage layer_agndc16 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 17: stage 16 again with another seed, whether its gain holds
+    stage layer_agndc16_seed19 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
+    # stage 13: agndc_fast distilled again from the shipped AGNDC
+    distil "$data" "${data}_distilled"
+    distil "$sheets" "${sheets}_distilled"
+    stage student_agndc16 --data "${data}_distilled,${sheets}_distilled" \
+        --init agndc_core/weights/agndc.safetensors --init-matching --model "$student_config" \
+        --steps 3000,300,300 --lr 5e-4 --ema 0.99 --seed 21 --val-steps 1000,2000,3000
+    # stage 15: stage 13's student continued on its own data at half its learning rate
+    stage student_agndc16_cont --data "${data}_distilled,${sheets}_distilled" \
+        --init "$runs/student_agndc16/final.safetensors" --model "$student_config" \
+        --steps 3000,0,0 --lr 2.5e-4 --ema 0.99 --seed 22 --val-steps 1000,2000,3000
+    ;;
+concluded)
+    # the stages of the current lineage whose verdict is in (none beat the shipped weights):
+    # 8-12 and 14, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -110,37 +134,14 @@ current)
     stage fresh_agndc16 --data "$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 13 (before stage 12 ends): agndc_fast distilled again from the shipped AGNDC
-    distil "$data" "${data}_distilled"
-    distil "$sheets" "${sheets}_distilled"
-    stage student_agndc16 --data "${data}_distilled,${sheets}_distilled" \
-        --init agndc_core/weights/agndc.safetensors --init-matching --model "$student_config" \
-        --steps 3000,300,300 --lr 5e-4 --ema 0.99 --seed 21 --val-steps 1000,2000,3000
     stage all_agndc16 --data "$data,$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
-    # stage 14: stage 10's recipe with 300 spiky shapes added (train-data --spikes 1.0)
     spikes="${data}_spikes"
     generate "$spikes" -n 300 --seed0 50000 --spikes 1.0
     stage spike_agndc16 --data "$data,$sheets,$spikes" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 16 (before stage 15 ends): stage 10's recipe with 300 layered parts added
-    # (train-data --layered 1.0; docs/experiments/layered-parts.md)
-    layered="${data}_layered"
-    generate "$layered" -n 300 --seed0 60000 --layered 1.0
-    stage layer_agndc16 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 17 (before stage 15 ends): stage 16 again with another seed, whether its gain on
-    # the validation family and the sheets holds
-    stage layer_agndc16_seed19 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
-    # stage 15: stage 13's student continued on its own data at half its learning rate
-    stage student_agndc16_cont --data "${data}_distilled,${sheets}_distilled" \
-        --init "$runs/student_agndc16/final.safetensors" --model "$student_config" \
-        --steps 3000,0,0 --lr 2.5e-4 --ema 0.99 --seed 22 --val-steps 1000,2000,3000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
@@ -172,7 +173,8 @@ undc)
         --init "$runs/bt_undc16_long/step-003000.safetensors" --lr 5e-4 --seed 6 --steps 2400
     ;;
 *)
-    echo "cpu_lineage.sh: the third argument is current, history or undc, not '$which'" >&2
+    echo "cpu_lineage.sh: the third argument is current, concluded, history or undc," \
+        "not '$which'" >&2
     exit 2
     ;;
 esac

@@ -14,6 +14,11 @@ as ``flatten_patches`` does for the patches it flattens.
 
     .venv/bin/python research/flat_terraces.py DATA -o OUT --max-std 0.08 \\
         --cache runs/pred_cache
+
+With ``--round-steps 0.3 --min-offset 0.15`` (and the default 16 cells) it is the product's
+``flatpatches.flatten_stepped_floors``, which the pipeline runs after this study's rule: the
+patches the study flattens are pinned, so the product's stage leaves them alone and a variant
+is measured on the terraces it takes and the product's stage on the rest.
 """
 
 from __future__ import annotations
@@ -26,7 +31,8 @@ from stage_eval import eval_parser, run_eval_cached
 
 def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: int,
                           log: Path | None = None, one_sided: bool = False,
-                          enclosed: float = 0.0):
+                          enclosed: float = 0.0, round_steps: float = 0.0,
+                          min_offset: float = 0.0):
     """Flatten, in place, the terrace patches of ``vertex`` that carry no pinned coordinate
     and whose coordinates along their axis vary by at most ``max_std`` (standard deviation)."""
     from scipy import ndimage
@@ -58,6 +64,10 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
                 rim_cells = np.bincount(patches[rim], minlength=count + 1)
                 stepped = np.bincount(patches[rim & (below | above)], minlength=count + 1)
                 terrace &= stepped >= enclosed * np.maximum(rim_cells, 1)
+            if round_steps > 0:  # the cells along a patch's up or down steps: not one line
+                terrace &= np.maximum(fp.step_roundness(patches, split & below, count),
+                                      fp.step_roundness(patches, split & above, count)) \
+                    >= round_steps
             cells = np.nonzero(split & terrace[patches])
             patch_of = patches[cells]
             values = coord[cells]
@@ -67,6 +77,8 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
             std = np.sqrt(np.maximum(square - mean ** 2, 0.0))
             taken = np.bincount(patch_of, pin[cells], count + 1) > 0
             flat = (size >= min_cells) & (std <= max_std) & ~taken
+            if min_offset > 0:  # only where the network's depth is far from the midpoint
+                flat &= np.abs(mean - fp.MIDPOINT) >= min_offset
             keep = flat[patch_of]
             index = tuple(c[keep] for c in cells)
             coord[index] = np.where(by_mean[lower_inside][index[2]], mean[patch_of[keep]],
@@ -91,6 +103,13 @@ def main() -> None:
     parser.add_argument("--enclosed", type=float, default=0.0,
                         help="only terraces with at least this share of their rim cells next "
                         "to a step (a floor or plateau the step surrounds)")
+    parser.add_argument("--round-steps", type=float, default=0.0,
+                        help="only terraces whose cells next to the steps up (or down) spread "
+                        "at least this ratio across their main direction (a step around a "
+                        "floor, not the straight step of a tilted face)")
+    parser.add_argument("--min-offset", type=float, default=0.0,
+                        help="only terraces whose mean network depth lies at least this far "
+                        "(in voxels) from the layer's midpoint")
     args = parser.parse_args()
 
     from agndc_core import flatpatches
@@ -102,7 +121,8 @@ def main() -> None:
         if pinned is None:
             pinned = np.zeros(vertex.shape, dtype=bool)
         return flatten_flat_terraces(lattice, vertex, pinned, args.max_std, args.min_cells,
-                                     args.log, args.one_sided, args.enclosed)
+                                     args.log, args.one_sided, args.enclosed,
+                                     args.round_steps, args.min_offset)
 
     flatpatches.fit_terraced_planes = fit_then_flatten
     run_eval_cached(args)

@@ -2,7 +2,8 @@
 exactly flat, at the network's mean depth on the shape's outermost layers and mid-layer inside
 its extent, terraces and everything else are left alone; then the same
 through ``pipeline.remesh`` with the shipped network. Then the source bounds: the faces that
-bound a voxelised mesh land on its bounding box, and nothing lies beyond it."""
+bound a voxelised mesh land on its bounding box, and nothing lies beyond it. Then the terraced
+planes and the stepped floors."""
 
 import numpy as np
 import pytest
@@ -512,3 +513,136 @@ def test_bends_measure_how_far_a_quadratic_fit_leaves_the_plane():
     best, *_ = np.linalg.lstsq(design, h[mine], rcond=None)
     expected = np.sqrt(np.mean((h[mine] - design @ best) ** 2))  # the surface is exactly quadratic
     assert bends[1] == pytest.approx(expected, rel=1e-6) and expected > 0.3
+
+
+# ------------------------------------------------------------------ stepped floors
+
+
+def recessed_box(n=30, depth_layers=1):
+    """A box whose top has a square recess ``depth_layers`` deep inside a 5-cell rim."""
+    lattice = np.zeros((n, n, n), dtype=bool)
+    lattice[5:25, 5:25, 5:15] = True
+    lattice[10:20, 10:20, 15 - depth_layers:15] = False
+    return lattice
+
+
+def stepped_cases():
+    """Recesses, a plateau on a ledge, a staircase and random blocks (flat patches, terraces,
+    floors)."""
+    yield recessed_box()
+    yield recessed_box(depth_layers=2)
+    plateau = np.zeros((24, 24, 20), dtype=bool)
+    plateau[3:21, 3:21, 3:8] = True
+    plateau[7:17, 6:18, 8] = True  # one layer above its ledge
+    yield plateau
+    yield staircase()
+    yield from random_lattices(6, seed=13)
+
+
+def staircase():
+    """Six terraces one layer apart along x, each 5 cells deep: the grid of a tilted plane."""
+    lattice = np.zeros((40, 20, 20), dtype=bool)
+    for step in range(6):
+        lattice[5 + 5 * step:10 + 5 * step, 5:15, 5:8 + step] = True
+    return lattice
+
+
+def flat_network(lattice, depth=0.8, noise=0.03, seed=0):
+    """Coordinates the network might give a patch it calls flat: ``depth`` give or take
+    ``noise`` voxels."""
+    rng = np.random.default_rng(seed)
+    return (depth + rng.normal(0.0, noise, lattice.shape + (3,))).astype(np.float32)
+
+
+def test_stepped_floors_fast_equals_naive():
+    changed = 0
+    for seed, lattice in enumerate(stepped_cases()):
+        for depth in (0.8, 0.2, 0.6):
+            vertex = flat_network(lattice, depth, seed=seed)
+            pinned = np.random.default_rng(seed).random(vertex.shape) < 0.002
+            for pin in (None, pinned):
+                fast = flatpatches.flatten_stepped_floors(
+                    lattice, vertex, pinned=None if pin is None else pin.copy())
+                naive = flatpatches.flatten_stepped_floors_naive(lattice, vertex, pin)
+                assert fast.dtype == vertex.dtype
+                np.testing.assert_allclose(fast, naive, atol=1e-6)
+                changed += int((fast != vertex).sum())
+    assert changed > 500  # the comparison saw floors being flattened
+
+
+def test_a_recessed_floor_goes_mid_layer_and_the_rim_keeps_its_mean():
+    lattice = recessed_box()
+    up = pure_splits(lattice, 2, True)
+    layers = np.flatnonzero(up.any(axis=(0, 1)))
+    floor, rim = layers[-2], layers[-1]
+    vertex = flat_network(lattice)
+    assert flatten_patches(lattice, vertex)[up[..., floor].nonzero() + (floor, 2)].std() > 0
+    pinned = np.zeros(vertex.shape, dtype=bool)
+    out = flatpatches.flatten_stepped_floors(lattice, vertex, pinned=pinned)
+    z = out[:-1, :-1, :-1, 2]
+    assert up[..., floor].sum() >= 64 and np.all(z[up[..., floor].nonzero() + (floor,)] == 0.5)
+    assert pinned[:-1, :-1, :-1, 2][up[..., floor].nonzero() + (floor,)].all()
+    # the rim steps down on both of its sides too: it is the shape's outermost layer, the mean
+    rim_cells = up[..., rim].nonzero() + (rim,)
+    np.testing.assert_allclose(z[rim_cells], vertex[:-1, :-1, :-1, 2][rim_cells].mean(),
+                               rtol=1e-6)
+    # not where the network's depth is near the midpoint, or not flat, or already placed
+    near = flat_network(lattice, 0.5 + tol.floor_offset / 2)
+    np.testing.assert_array_equal(flatpatches.flatten_stepped_floors(lattice, near), near)
+    noisy = flat_network(lattice, noise=0.2)
+    np.testing.assert_array_equal(flatpatches.flatten_stepped_floors(lattice, noisy), noisy)
+    taken = np.ones(vertex.shape, dtype=bool)
+    np.testing.assert_array_equal(
+        flatpatches.flatten_stepped_floors(lattice, vertex, pinned=taken), vertex)
+
+
+def test_a_staircases_straight_steps_are_left_to_the_network():
+    lattice = staircase()
+    vertex = flat_network(lattice)
+    np.testing.assert_array_equal(flatpatches.flatten_stepped_floors(lattice, vertex), vertex)
+    # each terrace's cells next to a step up, and next to a step down, lie along a line
+    split = pure_splits(lattice, 2, True)
+    patches, count = flatpatches.ndimage.label(split, flatpatches._IN_PLANE)
+    below, above = flatpatches.step_reach(split)
+    for cells in (split & below, split & above):
+        assert flatpatches.step_roundness(patches, cells, count).max() < tol.floor_roundness
+
+
+def test_step_roundness_is_zero_on_a_line_and_one_on_a_ring():
+    patches = np.zeros((40, 40, 2), dtype=int)
+    steps = np.zeros(patches.shape, dtype=bool)
+    patches[..., 0], patches[..., 1] = 1, 2
+    steps[5:35, 10, 0] = True
+    v, u = np.mgrid[:40, :40]
+    steps[..., 1] = np.abs(np.hypot(v - 20, u - 20) - 10) < 0.7
+    np.testing.assert_allclose(flatpatches.step_roundness(patches, steps, 2), [0, 0, 1],
+                               atol=0.02)
+
+
+def test_remesh_puts_a_layered_caps_floors_nearer_their_true_faces(monkeypatch):
+    """The shipped network reads a generated cap's one-layer steps as a gently tilted plane and
+    leaves its flat floors off their faces; the stepped floors stage moves them nearer
+    (the grid alone, 64³; docs/experiments/layered-parts.md)."""
+    import trimesh
+
+    from agndc_core import pipeline
+    from agndc_core.voxelize import voxelize
+    from conftest import research_script
+
+    vertices, faces = research_script("layered_caps").layered_cap(22)
+    voxelised = voxelize(vertices, faces, 64)
+    grid = VoxelGrid(voxelised.occupancy, affine=voxelised.affine)  # without the bounds
+    on = remesh(grid, method="agndc", threads=1)
+    monkeypatch.setattr(pipeline, "STEPPED_FLOORS", False)
+    off = remesh(grid, method="agndc", threads=1)
+    assert "stepped floors" in on.timings and "stepped floors" not in off.timings
+    moved = np.abs(on.vertices - off.vertices).max(axis=1) > 1e-6
+    assert moved.sum() > 1000
+    truth = trimesh.Trimesh(vertices, faces)
+    voxel = np.linalg.norm(voxelised.affine[:3, 0])
+
+    def mean_distance(points):
+        return np.abs(trimesh.proximity.signed_distance(truth, points)).mean() / voxel
+
+    before, after = mean_distance(off.vertices[moved]), mean_distance(on.vertices[moved])
+    assert after < 0.7 * before

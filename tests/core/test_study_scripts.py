@@ -242,6 +242,11 @@ def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
                                             np.zeros(vertex.shape, bool), max_std=0.08,
                                             min_cells=16, one_sided=True, enclosed=0.9)
     np.testing.assert_allclose(enclosed, out)
+    # and when the cells along its step must spread both ways (a ring, not a line)
+    rounded = script.flatten_flat_terraces(lattice, vertex.copy(),
+                                           np.zeros(vertex.shape, bool), max_std=0.08,
+                                           min_cells=16, round_steps=0.5)
+    np.testing.assert_allclose(rounded, out)
     noisy = vertex + np.random.default_rng(0).normal(0, 0.2, vertex.shape)
     out = script.flatten_flat_terraces(lattice, noisy.copy(), np.zeros(vertex.shape, bool),
                                        max_std=0.08, min_cells=16)
@@ -267,6 +272,47 @@ def test_flat_terraces_takes_a_recessed_floor_the_network_calls_flat():
                                             max_std=0.08, min_cells=16, one_sided=True,
                                             enclosed=0.9)
     np.testing.assert_array_equal(enclosed, vertex)
+    # each terrace's steps up and its steps down are straight lines: none is round
+    rounded = script.flatten_flat_terraces(lattice, vertex.copy(), np.zeros(vertex.shape, bool),
+                                           max_std=0.08, min_cells=16, round_steps=0.4)
+    np.testing.assert_array_equal(rounded, vertex)
+
+
+def test_averaged_weights_are_the_mean_of_the_checkpoints(tmp_path):
+    """average_weights: the soup of two checkpoints holds each tensor's (weighted) mean and
+    names its sources; a soup of one architecture with another is refused."""
+    import numpy as np
+    import pytest
+    import torch
+
+    from agndc_core.checkpoint import read_checkpoint_metadata, read_safetensors, save_checkpoint
+    from agndc_core.errors import ModelError
+    from agndc_core.nn import AGNDCCascade
+    from agndc_core.nn.config import AGNDCConfig
+
+    script = research_script("average_weights")
+    config = AGNDCConfig(width=4, band_radius=2)
+    paths = []
+    for seed in (0, 1):
+        torch.manual_seed(seed)
+        paths.append(save_checkpoint(AGNDCCascade(config), tmp_path / f"net{seed}",
+                                     training={"seed": seed}, metrics={}))
+    with torch.no_grad():
+        model, metas = script.average_models(paths, [3.0, 1.0])
+    out = save_checkpoint(model, tmp_path / "soup", training={}, metrics={})
+    a, b, soup = (read_safetensors(p) for p in (*paths, out))
+    assert [m["training"]["seed"] for m in metas] == [0, 1]
+    differ = [k for k in a if a[k].dtype.kind == "f" and not np.array_equal(a[k], b[k])]
+    assert differ
+    for key in differ:
+        np.testing.assert_allclose(soup[key], 0.75 * a[key] + 0.25 * b[key], atol=1e-6)
+    other = save_checkpoint(AGNDCCascade(AGNDCConfig(width=8, band_radius=2)),
+                            tmp_path / "wide", training={}, metrics={})
+    with pytest.raises(ModelError, match="different architectures"):
+        script.average_models([paths[0], other])
+    with pytest.raises(ModelError, match="at least two"):
+        script.average_models(paths[:1])
+    read_checkpoint_metadata(out)
 
 
 def test_patch_medians_are_each_patchs_median():
