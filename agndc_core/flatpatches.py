@@ -86,11 +86,7 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
     lattice = np.asarray(lattice, dtype=bool)
     out = vertex if in_place else np.array(vertex, copy=True)
     for axis in range(3):
-        by_mean = mean_depth_layers(lattice, axis)
-        points = np.moveaxis(lattice, axis, -1)  # split axis last
-        # (X-1, Y-1, Z-1) view of the cells' coordinate along axis, split axis last
-        coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
-        pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        by_mean, points, coord, pin = _axis_views(lattice, out, pinned, axis)
         layers = coord.shape[-1]
         # a patch lies in one layer, so slabs of layers are exact and bound the memory; each
         # slab also sees one layer beyond each end, which the terrace test reads
@@ -102,6 +98,16 @@ def flatten_patches(lattice: np.ndarray, vertex: np.ndarray, *,
                               range(first - lo, last - lo), by_mean[lower_inside][lo:hi],
                               None if pin is None else pin[..., lo:hi])
     return out
+
+
+def _axis_views(lattice: np.ndarray, vertex: np.ndarray, pinned: np.ndarray | None, axis: int):
+    """(``mean_depth_layers``, the lattice points with ``axis`` last, a (X-1, Y-1, Z-1) view of
+    the cells' coordinate along ``axis`` with that axis last, the same view of ``pinned`` or
+    None): what a stage that writes flat patches along one axis reads and writes."""
+    points = np.moveaxis(lattice, axis, -1)  # split axis last
+    coord = np.moveaxis(vertex[..., axis], axis, -1)[:-1, :-1, :-1]
+    pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+    return mean_depth_layers(lattice, axis), points, coord, pin
 
 
 def patch_depths(patch_of: np.ndarray, values: np.ndarray, count: int) -> np.ndarray:
@@ -331,10 +337,7 @@ def flatten_stepped_floors(lattice: np.ndarray, vertex: np.ndarray, *,
     lattice = np.asarray(lattice, dtype=bool)
     out = vertex if in_place else np.array(vertex, copy=True)
     for axis in range(3):
-        by_mean = mean_depth_layers(lattice, axis)
-        points = np.moveaxis(lattice, axis, -1)  # split axis last
-        coord = np.moveaxis(out[..., axis], axis, -1)[:-1, :-1, :-1]
-        pin = None if pinned is None else np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        by_mean, points, coord, pin = _axis_views(lattice, out, pinned, axis)
         for lower_inside in KINDS:
             _flatten_floors_of_kind(points, coord, lower_inside, by_mean[lower_inside], pin)
     return out
@@ -354,11 +357,8 @@ def _flatten_floors_of_kind(points, coord, lower_inside: bool, by_mean: np.ndarr
                           step_roundness(patches, split & above, count)) >= tol.floor_roundness
     cells = np.nonzero(split & terrace[patches])
     patch_of = patches[cells]
-    values = coord[cells]
     size = np.bincount(patch_of, minlength=count + 1)
-    mean = patch_depths(patch_of, values, count)
-    square = np.bincount(patch_of, values * values, count + 1) / np.maximum(size, 1)
-    spread = np.sqrt(np.maximum(square - mean * mean, 0.0))
+    mean, spread = patch_spreads(patch_of, coord[cells], count)
     floor = (size >= tol.floor_cells) & (spread <= tol.floor_flatness) \
         & (np.abs(mean - MIDPOINT) >= tol.floor_offset)
     if pin is not None:
@@ -368,6 +368,15 @@ def _flatten_floors_of_kind(points, coord, lower_inside: bool, by_mean: np.ndarr
     coord[cells] = np.where(by_mean[cells[2]], mean[patch_of[keep]], MIDPOINT)
     if pin is not None:
         pin[cells] = True
+
+
+def patch_spreads(patch_of: np.ndarray, values: np.ndarray, count: int):
+    """((count + 1,) mean, (count + 1,) standard deviation) of each patch's cell ``values``
+    (``patch_of``: (S,) the patch of each cell in 1..count)."""
+    mean = patch_depths(patch_of, values, count)
+    size = np.maximum(np.bincount(patch_of, minlength=count + 1), 1)
+    square = np.bincount(patch_of, values * values, count + 1) / size
+    return mean, np.sqrt(np.maximum(square - mean * mean, 0.0))
 
 
 def step_roundness(patches: np.ndarray, step_cells: np.ndarray, count: int) -> np.ndarray:

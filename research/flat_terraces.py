@@ -70,11 +70,8 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
                     >= round_steps
             cells = np.nonzero(split & terrace[patches])
             patch_of = patches[cells]
-            values = coord[cells]
             size = np.bincount(patch_of, minlength=count + 1)
-            mean = fp.patch_depths(patch_of, values, count)
-            square = np.bincount(patch_of, values ** 2, count + 1) / np.maximum(size, 1)
-            std = np.sqrt(np.maximum(square - mean ** 2, 0.0))
+            mean, std = fp.patch_spreads(patch_of, coord[cells], count)
             taken = np.bincount(patch_of, pin[cells], count + 1) > 0
             flat = (size >= min_cells) & (std <= max_std) & ~taken
             if min_offset > 0:  # only where the network's depth is far from the midpoint
