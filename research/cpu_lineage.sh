@@ -6,15 +6,16 @@
 #       > lineage.log 2>&1 &
 #
 # Only a stage's run folder carries its state: a new machine starts a stage again from its
-# start and, the stage being seeded, draws the same crops and reaches the same weights. So
+# start and, the stage being seeded, draws the same crops (the weights come out close, not bit
+# for bit, on another CPU). So
 # `current` (the default) holds only the stages whose verdict is open, and a machine that has
 # only the repository starts on them. Stage 16: stage 10's recipe (the shipped weights continued
 # on DATA and the 200 thin sheets at 5e-5, EMA 0.995) with 300 layered parts added (DATA_layered,
 # agndc train-data --layered 1.0: caps, lids and stepped plates whose layers are about a voxel
 # thick, the dev mesh abc8's pattern), checkpoints at 400 and 800; its step 400 beat the shipped
 # weights on the centred sheets and family, level on their shifted grids. Stage 17: stage 16 with
-# another seed (19); the two steps 400 are also averaged weight by weight
-# (docs/experiments/layered-parts.md). Stage 13: agndc_fast distilled again from the shipped
+# another seed (19): its step 400 does not repeat the family's gain, and the two steps 400
+# averaged weight by weight score the mean of the two (docs/experiments/layered-parts.md). Stage 13: agndc_fast distilled again from the shipped
 # AGNDC: the teacher's vertices on DATA and the sheets (agndc distil-data), then the student's
 # recipe (docs/training.md, "agndc_fast, distilled"), checkpoints at 1,000, 2,000 and 3,000
 # finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
