@@ -31,6 +31,7 @@ import numpy as np
 from .errors import AGNDCError
 from .grid import CELL_EDGES as EDGE_STARTS  # the one definition of a cell's 12 edges
 from .grid import OTHER_AXES
+from .tolerances import tol
 
 
 class ContourError(AGNDCError, ValueError):
@@ -522,12 +523,16 @@ def component_volumes(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarra
 def restore_folded_components(vertices: np.ndarray, faces: np.ndarray,
                               reference: np.ndarray) -> tuple[np.ndarray, int]:
     """Give every component whose enclosed volume has the opposite sign to the ``reference``
-    vertices' (the same faces, e.g. surface nets) the reference's vertices.
+    vertices' (the same faces, e.g. surface nets), or is flattened to nearly none of it, the
+    reference's vertices.
 
     A closed surface's signed volume tells inside from out: a learned vertex set that turns a
     component inside out (isolated voxels of noise grids, whose vertices a network may fold
     through each other) would leave an inverted surface; surface nets never does (the random-
-    and noise-grid property tests).
+    and noise-grid property tests). A component squashed flat (a lone voxel whose upper and
+    lower faces the network put on one plane: volume ~1e-16 against surface nets' 0.04) has no
+    inside at all, so one holding less than ``tol.fold_volume`` of the reference's volume is
+    restored too.
 
     Returns:
         (vertices, the number of components restored).
@@ -535,8 +540,10 @@ def restore_folded_components(vertices: np.ndarray, faces: np.ndarray,
     if len(faces) == 0:
         return vertices, 0
     labels = face_components(faces, len(vertices))
-    folded = np.sign(component_volumes(vertices, faces, labels)) != np.sign(
-        component_volumes(reference, faces, labels))
+    volume = component_volumes(vertices, faces, labels)
+    expected = component_volumes(reference, faces, labels)
+    folded = (np.sign(volume) != np.sign(expected)) | (
+        np.abs(volume) < tol.fold_volume * np.abs(expected))
     if not folded.any():
         return vertices, 0
     restore = np.zeros(len(vertices), dtype=bool)

@@ -40,6 +40,10 @@ class Tolerances:
     # passes of alternating projections that move a terraced surface's least-squares plane
     # into its cells' layers (flatpatches._into_layers)
     terrace_projections: int = 100
+    # a learned component enclosing less than this share of its surface nets volume is squashed
+    # flat (contour.restore_folded_components) and takes the surface nets vertices; a lone voxel
+    # the network shrinks keeps a sizeable share (a squashed one had 3e-15)
+    fold_volume: float = 1e-3
     # a terrace that a step surrounds (a recessed floor, a plateau on a ledge) goes to its
     # layer's midpoint (flatpatches.flatten_stepped_floors) when the network sees it flat: its
     # coordinates have at most this standard deviation, in voxels...

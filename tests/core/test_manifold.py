@@ -212,3 +212,12 @@ def test_a_component_turned_inside_out_takes_the_reference_vertices():
     np.testing.assert_array_equal(restored[4:], two[4:])
     np.testing.assert_array_equal(restored[:4], folded[:4])
     assert restore_folded_components(two, both, two)[1] == 0
+    # squashed flat (a lone voxel's faces on one plane): no inside either, restored
+    flat = two.copy()
+    flat[4:, 2] = 5.0 + 1e-9 * tetra[:, 2]  # still outward, by a hair
+    restored, count = restore_folded_components(flat, both, two)
+    assert count == 1
+    np.testing.assert_array_equal(restored[4:], two[4:])
+    shrunk = two.copy()
+    shrunk[4:] = 0.3 * tetra + 5.0  # small but a solid: kept
+    assert restore_folded_components(shrunk, both, two)[1] == 0
