@@ -26,7 +26,10 @@ the same kind one layer up or down lies within ``tol.terrace_reach`` cells of it
 There the surface steps through the layers, and the variation of the network's coordinate
 within the patch is the slope or the curvature, not noise. The terraces of a slightly tilted
 plane are then fitted by one plane (``fit_terraced_planes``), which the network cannot see
-across terraces tens of cells wide.
+across terraces tens of cells wide. A terrace that its step runs round (a floor one layer below
+its rim, a plateau one layer above its ledge) is not part of a plane, whose steps are straight
+lines; where the network sees it flat but off its layer's middle, it goes to the middle
+(``flatten_stepped_floors``).
 
 **Source bounds.** When the grid was voxelised from a mesh, the mesh's bounding box is known
 (``VoxelGrid.source_bounds``), and it says what the grid cannot: the faces that bound the shape
@@ -36,8 +39,8 @@ coordinate of that side's bounding plane, and pulls every other vertex of that l
 beyond the plane back onto it (the edges and corners of a bounding face). A side whose plane
 lies outside its outermost layer (a part too thin to leave voxels sticks out) is left alone.
 
-``flatten_patches_naive`` and ``snap_to_bounds_naive`` are the slow, obviously correct
-references (a flood fill per patch).
+``flatten_patches_naive``, ``fit_terraced_planes_naive``, ``flatten_stepped_floors_naive`` and
+``snap_to_bounds_naive`` are the slow, obviously correct references (a flood fill per patch).
 """
 
 from __future__ import annotations
