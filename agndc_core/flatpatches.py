@@ -180,6 +180,14 @@ def _flatten_slab(points, coord, lower_inside: bool, written: range, by_mean: np
     mean = patch_depths(patch_of, coord[cells], count)
     keep = ~terrace_patches(split, patches, count)[patch_of]
     keep &= (cells[2] >= written.start) & (cells[2] < written.stop)  # halo layers: not ours
+    set_patch_depths(coord, pin, cells, patch_of, keep, mean, by_mean)
+
+
+def set_patch_depths(coord, pin, cells, patch_of, keep, mean, by_mean) -> None:
+    """Give the split cells that ``keep`` selects the depth of their patch, in place: its
+    ``mean`` on the layers ``by_mean`` names, ``MIDPOINT`` elsewhere; set ``pin`` (if any)
+    there. ``cells``: (3,) index arrays of the split cells (split axis last); ``patch_of``, the
+    patch of each; ``keep``, (S,) bool; the rest as ``_flatten_slab``'s."""
     cells = tuple(c[keep] for c in cells)
     coord[cells] = np.where(by_mean[cells[2]], mean[patch_of[keep]], MIDPOINT)
     if pin is not None:
@@ -366,11 +374,7 @@ def _flatten_floors_of_kind(points, coord, lower_inside: bool, by_mean: np.ndarr
         & (np.abs(mean - MIDPOINT) >= tol.floor_offset)
     if pin is not None:
         floor &= np.bincount(patch_of, pin[cells], count + 1) == 0
-    keep = floor[patch_of]
-    cells = tuple(c[keep] for c in cells)
-    coord[cells] = np.where(by_mean[cells[2]], mean[patch_of[keep]], MIDPOINT)
-    if pin is not None:
-        pin[cells] = True
+    set_patch_depths(coord, pin, cells, patch_of, floor[patch_of], mean, by_mean)
 
 
 def patch_spreads(patch_of: np.ndarray, values: np.ndarray, count: int):

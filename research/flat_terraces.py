@@ -41,10 +41,7 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
 
     lattice = np.asarray(lattice, dtype=bool)
     for axis in range(3):
-        by_mean = fp.mean_depth_layers(lattice, axis)
-        points = np.moveaxis(lattice, axis, -1)
-        coord = np.moveaxis(vertex[..., axis], axis, -1)[:-1, :-1, :-1]
-        pin = np.moveaxis(pinned[..., axis], axis, -1)[:-1, :-1, :-1]
+        by_mean, points, coord, pin = fp._axis_views(lattice, vertex, pinned, axis)
         for lower_inside in fp.KINDS:
             split = fp._pure_splits_last(points, lower_inside)
             patches, count = ndimage.label(split, fp._IN_PLANE)
@@ -76,11 +73,8 @@ def flatten_flat_terraces(lattice, vertex, pinned, max_std: float, min_cells: in
             flat = (size >= min_cells) & (std <= max_std) & ~taken
             if min_offset > 0:  # only where the network's depth is far from the midpoint
                 flat &= np.abs(mean - fp.MIDPOINT) >= min_offset
-            keep = flat[patch_of]
-            index = tuple(c[keep] for c in cells)
-            coord[index] = np.where(by_mean[lower_inside][index[2]], mean[patch_of[keep]],
-                                    fp.MIDPOINT)
-            pin[index] = True
+            fp.set_patch_depths(coord, pin, cells, patch_of, flat[patch_of], mean,
+                                by_mean[lower_inside])
             if log is not None and np.any(flat):
                 with open(log, "a") as handle:
                     for p in np.flatnonzero(flat):
