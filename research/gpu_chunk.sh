@@ -22,6 +22,9 @@
 # AGNDC_SHEETS=SHARE: the share of thin sheets (`agndc train-data --sheets`, default 0.15: 18 %
 # of the samples gained 3.4 points of the validation family's headroom on centred grids over a
 # control at equal steps, docs/experiments/sheet-training.md), its own folder too.
+# AGNDC_LAYERED=SHARE: the share of layered parts (caps, lids, stepped plates: `agndc train-data
+# --layered`, default 0; the CPU lineage's stages 16-17 had 21 %, which gained on the thin
+# sheets with both seeds, docs/experiments/layered-parts.md), its own folder too.
 # AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
 # workers), benchmarks/bench_training_throughput.py times those variants (eager or a
 # `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
@@ -69,7 +72,8 @@ data=/tmp/agndc_data
 resolutions=${AGNDC_RESOLUTIONS:-32,128}
 wrinkled=${AGNDC_WRINKLED:-0.5}
 sheets=${AGNDC_SHEETS:-0.15}
-train="$data/train_${resolutions/,/-}_w${wrinkled}_s$sheets"
+layered=${AGNDC_LAYERED:-0}
+train="$data/train_${resolutions/,/-}_w${wrinkled}_s${sheets}_l$layered"
 mkdir -p /tmp/agndc_runs
 agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
@@ -78,7 +82,8 @@ genpid=/tmp/agndc_runs/datagen.pid
 start_datagen() {
     alive "$genpid" && return 0
     setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
-        --wrinkled "$wrinkled" --sheets "$sheets" -n "${AGNDC_SAMPLES:-5000}" --workers "$1" \
+        --wrinkled "$wrinkled" --sheets "$sheets" --layered "$layered" \
+        -n "${AGNDC_SAMPLES:-5000}" --workers "$1" \
         >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
     echo $! >"$genpid"
 }
@@ -148,7 +153,7 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     fi
     while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$train" --resolutions "$resolutions" --wrinkled "$wrinkled" \
-        --sheets "$sheets" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
+        --sheets "$sheets" --layered "$layered" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
     echo "data ready after $(( $(date +%s) - start )) s: $(ls "$train" | wc -l) samples"
     while read -r name own; do
         # word splitting of the study line's options is intended (no quoting inside a line)
