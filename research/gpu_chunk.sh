@@ -28,7 +28,8 @@
 # AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
 # workers), benchmarks/bench_training_throughput.py times those variants (eager or a
 # `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
-# writes $OUT/throughput.txt (at most AGNDC_BENCH_SECONDS, default 240).
+# writes $OUT/throughput.txt (at most AGNDC_BENCH_SECONDS, default 240), for the width
+# AGNDC_BENCH_WIDTH (default 16).
 #
 # A study, several runs side by side on the one GPU (a width-16 step is bound by launching
 # kernels, not by the GPU, docs/experiments/step-times.md):
@@ -148,7 +149,7 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
         start_datagen 12
         timeout "${AGNDC_BENCH_SECONDS:-240}" "$py" benchmarks/bench_training_throughput.py \
             --data "$data/val" --device "${AGNDC_BENCH_DEVICE:-cuda}" --variants "$AGNDC_BENCH" \
-            --steps 20 --warmup 3 --threads 2 2>&1 | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" \
+            --width "${AGNDC_BENCH_WIDTH:-16}" --steps 20 --warmup 3 --threads 2 2>&1 | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" \
             || true
     fi
     while alive "$genpid"; do sleep 2; done
