@@ -25,6 +25,11 @@
 # AGNDC_LAYERED=SHARE: the share of layered parts (caps, lids, stepped plates: `agndc train-data
 # --layered`, default 0; the CPU lineage's stages 16-17 had 21 %, which gained on the thin
 # sheets with both seeds, docs/experiments/layered-parts.md), its own folder too.
+# AGNDC_SCORE=SHARDS (one run only): the run's newest checkpoint (final, else the last --val-steps
+# one) scored on the validation family beside the shipped weights once the wait is over
+# (research/score_family_parallel.sh on SHARDS processes, e.g. 6: the shipped weights' rows are
+# made while the trainer runs), the comparison in $OUT/score.md. Leave ~2 minutes of SECONDS'
+# time for it after the trainer's --max-minutes.
 # AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
 # workers), benchmarks/bench_training_throughput.py times those variants (eager or a
 # `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
@@ -162,9 +167,33 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
         start_run "$name" "$@" $own
     done <<<"$runs"
 fi
+score=/tmp/agndc_score
+if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ ! -f "$score/shipped/rows.csv" ] \
+        && ! alive "$score.pid"; then
+    # the reference while the trainer runs: the family's shards and the shipped weights' rows
+    mkdir -p "$score"
+    AGNDC_PYTHON="$py" setsid nohup bash research/score_family_parallel.sh "$data/family" \
+        "$score" "$AGNDC_SCORE" >"$score/shipped.log" 2>&1 </dev/null &
+    echo $! >"$score.pid"
+fi
 while [ $(( $(date +%s) - start )) -lt "$seconds" ] && any_alive; do
     sleep 5
 done
+if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ -f "$score.pid" ]; then
+    work=/tmp/agndc_runs/$run
+    newest=$(ls "$work"/final.safetensors 2>/dev/null \
+        || ls "$work"/step-*.safetensors 2>/dev/null | sort | tail -n 1 || true)
+    while alive "$score.pid"; do sleep 2; done
+    if [ -n "$newest" ] && [ -f "$score/shipped/rows.csv" ]; then
+        echo "scoring $(basename "$newest") on the validation family"
+        AGNDC_PYTHON="$py" bash research/score_family_parallel.sh "$data/family" "$score" \
+            "$AGNDC_SCORE" "$newest" >"$score/candidate.log" 2>&1 || true
+        cp "$score/$(basename "$newest" .safetensors).md" "${OUT:-/tmp}/score.md" 2>/dev/null \
+            && cat "${OUT:-/tmp}/score.md" || tail -n 5 "$score"/*.log
+    else
+        echo "no checkpoint or no reference to score"; tail -n 5 "$score/shipped.log" || true
+    fi
+fi
 for name in $names; do
     work=/tmp/agndc_runs/$name
     [ -d "$work" ] || { echo "$name: no run folder"; continue; }
