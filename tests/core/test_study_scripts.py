@@ -1,8 +1,13 @@
 """The resumable study scripts' shared steps (research/study_runs.sh), with a stand-in for the
 agndc command that records how it was called."""
 
+import csv
+import os
 import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 from conftest import research_script
 
@@ -528,3 +533,34 @@ def test_layered_caps_are_closed_and_their_flat_faces_lie_whole_layers_apart():
     assert set(skirt_side) == {-1.0, 1.0}
     thin = script.layered_cap(0, layer=(0.5, 0.51))[0]
     assert np.ptp(thin[:, 2]) < np.ptp(script.layered_cap(0)[0][:, 2])
+
+
+@pytest.mark.slow
+def test_the_family_scored_in_shards_gives_the_rows_of_one_eval(tmp_path):
+    """research/score_family_parallel.sh: shards made from their own first seeds are the family's
+    shapes, and their merged rows are those of one `agndc eval` of the whole family."""
+    python = sys.executable
+    env = {**os.environ, "AGNDC_PYTHON": python, "AGNDC_FAMILY_SIZE": "2"}
+    script = REPO / "research" / "score_family_parallel.sh"
+    subprocess.run(["bash", str(script), tmp_path / "val", tmp_path / "out", "2"], check=True,
+                   env=env, capture_output=True)
+    cli = [python, "-m", "agndc_core.cli"]
+    subprocess.run([*cli, "val-data", "-o", tmp_path / "whole", "-n", "2", "--workers", "1"],
+                   check=True, capture_output=True, cwd=REPO)
+    subprocess.run([*cli, "eval", tmp_path / "whole", "--res", "64", "--methods",
+                    "mc,oracle_binary,agndc", "--samples", "30000", "-o", tmp_path / "one"],
+                   check=True, capture_output=True, cwd=REPO)
+
+    def rows(path):
+        with open(path) as f:
+            return [(r["name"], r["category"], r["method"], r["cd"], r["ef1"])
+                    for r in csv.DictReader(f)]
+
+    sharded = rows(tmp_path / "out" / "shipped" / "rows.csv")
+    assert len(sharded) == 6 and sharded == rows(tmp_path / "one" / "rows.csv")
+    # a checkpoint against that reference: its comparison is printed and written
+    weights = REPO / "agndc_core" / "weights" / "agndc.safetensors"
+    done = subprocess.run(["bash", str(script), tmp_path / "val", tmp_path / "out", "2", weights],
+                          check=True, env=env, capture_output=True, text=True)
+    assert "CD below the reference's on 0 of 2 grids" in done.stdout
+    assert (tmp_path / "out" / "agndc.md").read_text() == done.stdout
