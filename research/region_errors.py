@@ -12,9 +12,10 @@ moved by ``--shift`` (voxels, as ``agndc eval --shifts`` moves it). Printed per 
   ``down``), the others (``side``); then near a sharp edge (within 1.5 voxels of a sample of
   ``metrics.edge_points``), on axis-aligned faces away from edges (``flat``), the rest
   (``other``). Each part is its share of the total, so the parts add up to the CD;
-* for each plane of the ground truth perpendicular to the thinnest axis with at least 1 % of its
-  area (upward and downward faces apart), the median offset along the axis (voxels, positive
-  up) from its samples to the nearest output samples: ``--planes``;
+* for each plane of the ground truth perpendicular to the thinnest axis (every axis with
+  ``--all-axes``) with at least 1 % of its area (upward and downward faces apart), the median
+  offset along the axis (voxels, positive up) from its samples to the nearest output samples:
+  ``--planes``;
 * with ``--heights N``, the CD's parts in N equal slabs of height along ``--height-axis`` (0-2,
   default the thinnest), lowest first, and the two directions apart (ground truth to output,
   output to ground truth): where along a row of cones the tips lose.
@@ -55,6 +56,8 @@ def main() -> None:
     parser.add_argument("--shift", default="0,0,0", help="X,Y,Z sub-voxel shift of the grid")
     parser.add_argument("--samples", type=int, default=100_000)
     parser.add_argument("--planes", action="store_true")
+    parser.add_argument("--all-axes", action="store_true", help="--planes perpendicular to every "
+                        "axis, not only the thinnest")
     parser.add_argument("--heights", type=int, default=0, help="slabs of height, 0: none")
     parser.add_argument("--height-axis", type=int, default=None)
     args = parser.parse_args()
@@ -91,13 +94,15 @@ def main() -> None:
         edges = np.linspace(level.min(), level.max(), args.heights + 1)
         slab = np.clip(np.searchsorted(edges, level, side="right") - 1, 0, args.heights - 1)
         splits.append({f"h{k}": slab == k for k in range(args.heights)})
-    height = np.round(gt[:, axis] / voxel, 2)
-    planes = []  # (level, facing up): an upward and a downward face can share a level
-    for up in (True, False):
-        on_plane = facing > AXIS_ALIGNED if up else facing < -AXIS_ALIGNED
-        levels, counts = np.unique(height[on_plane], return_counts=True)
-        planes += [(level, up, on_plane & (height == level))
-                   for level in levels[counts >= 0.01 * len(gt)]]
+    planes = []  # (axis, level, facing up): an upward and a downward face can share a level
+    for plane_axis in range(3) if args.all_axes else (axis,):
+        height = np.round(gt[:, plane_axis] / voxel, 2)
+        for up in (True, False):
+            along = gt_normal[:, plane_axis]
+            on_plane = along > AXIS_ALIGNED if up else along < -AXIS_ALIGNED
+            levels, counts = np.unique(height[on_plane], return_counts=True)
+            planes += [(plane_axis, level, up, on_plane & (height == level))
+                       for level in levels[counts >= 0.01 * len(gt)]]
     print(f"{args.mesh}: thinnest axis {axis}, {edge.sum()} edge samples, shift {shift}")
     for method in args.methods.split(","):
         result = remesh_mesh(vertices, faces, resolution=args.res, method=method,
@@ -117,10 +122,12 @@ def main() -> None:
                      f" out→gt {1e5 * np.mean(d_out ** 2):.3f} |")
         print(line)
         if args.planes:
-            for level, up, mask in planes:
-                offset = (out[out_tree.query(gt[mask])[1], axis] - gt[mask, axis]) / voxel
-                print(f"    {'up' if up else 'down'}-facing plane at {level:+.2f} voxels "
-                      f"({mask.sum()} samples): median offset {np.median(offset):+.3f}")
+            for plane_axis, level, up, mask in planes:
+                offset = (out[out_tree.query(gt[mask])[1], plane_axis]
+                          - gt[mask, plane_axis]) / voxel
+                print(f"    {'up' if up else 'down'}-facing plane of axis {plane_axis} at "
+                      f"{level:+.2f} voxels ({mask.sum()} samples): median offset "
+                      f"{np.median(offset):+.3f}")
 
 
 if __name__ == "__main__":
