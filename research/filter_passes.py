@@ -4,8 +4,10 @@ The pipeline filters every learned method's mesh with ``normalfilter.DEFAULT``; 
 replaces fields of it (``NormalFilter``) and scores AGNDC, e.g. the detail rule's thresholds
 and pass counts:
 
-    .venv/bin/python research/filter_passes.py DATA -o OUT --res 64 detail_degrees=8
-    .venv/bin/python research/filter_passes.py DATA -o OUT --shifts 3 detail_vertex_iterations=10
+    .venv/bin/python research/filter_passes.py DATA detail_degrees=8 -o OUT --res 64
+    .venv/bin/python research/filter_passes.py DATA detail_vertex_iterations=10 -o OUT --shifts 3
+
+(the fields right after DATA: argparse takes no positional after an option.)
 
 (``detail_vertex_iterations=10`` is the full update everywhere.) docs/experiments/normal-filter.md
 ("Lighter on detail") has the measurements.
