@@ -26,10 +26,10 @@
 # --layered`, default 0; the CPU lineage's stages 16-17 had 21 %, which gained on the thin
 # sheets with both seeds, docs/experiments/layered-parts.md), its own folder too.
 # AGNDC_SCORE=SHARDS (one run only): the run's newest checkpoint (final, else the last --val-steps
-# one) scored on the validation family beside the shipped weights once the wait is over
-# (research/score_family_parallel.sh on SHARDS processes, e.g. 6: the shipped weights' rows are
-# made while the trainer runs), the comparison in $OUT/score.md. Leave ~2 minutes of SECONDS'
-# time for it after the trainer's --max-minutes.
+# one) scored on the validation family and the thin sheets beside the shipped weights once the
+# wait is over (research/score_validation_parallel.sh on SHARDS processes, a divisor of 24, e.g.
+# 6: the shipped weights' rows are made while the trainer runs), the comparisons in
+# $OUT/score.md. Leave ~1-2 minutes of SECONDS' time for it after the trainer's --max-minutes.
 # AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
 # workers), benchmarks/bench_training_throughput.py times those variants (eager or a
 # `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
@@ -168,12 +168,20 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     done <<<"$runs"
 fi
 score=/tmp/agndc_score
-if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ ! -f "$score/shipped/rows.csv" ] \
+sets="family sheets"
+# score_sets [CHECKPOINT]: research/score_validation_parallel.sh on each set in turn
+score_sets() {
+    local set
+    for set in $sets; do
+        AGNDC_PYTHON="$py" bash research/score_validation_parallel.sh "$set" "$data/score" \
+            "$score" "$AGNDC_SCORE" "$@" || return 1
+    done
+}
+if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ ! -f "$score/sheets/shipped/rows.csv" ] \
         && ! alive "$score.pid"; then
-    # the reference while the trainer runs: the family's shards and the shipped weights' rows
+    # the reference while the trainer runs: the sets' shards and the shipped weights' rows
     mkdir -p "$score"
-    AGNDC_PYTHON="$py" setsid nohup bash research/score_family_parallel.sh "$data/family" \
-        "$score" "$AGNDC_SCORE" >"$score/shipped.log" 2>&1 </dev/null &
+    (score_sets) >"$score/shipped.log" 2>&1 </dev/null &
     echo $! >"$score.pid"
 fi
 while [ $(( $(date +%s) - start )) -lt "$seconds" ] && any_alive; do
@@ -184,12 +192,19 @@ if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ -f "$score.pid" ]; then
     newest=$(ls "$work"/final.safetensors 2>/dev/null \
         || ls "$work"/step-*.safetensors 2>/dev/null | sort | tail -n 1 || true)
     while alive "$score.pid"; do sleep 2; done
-    if [ -n "$newest" ] && [ -f "$score/shipped/rows.csv" ]; then
-        echo "scoring $(basename "$newest") on the validation family"
-        AGNDC_PYTHON="$py" bash research/score_family_parallel.sh "$data/family" "$score" \
-            "$AGNDC_SCORE" "$newest" >"$score/candidate.log" 2>&1 || true
-        cp "$score/$(basename "$newest" .safetensors).md" "${OUT:-/tmp}/score.md" 2>/dev/null \
-            && cat "${OUT:-/tmp}/score.md" || tail -n 5 "$score"/*.log
+    if [ -n "$newest" ] && [ -f "$score/sheets/shipped/rows.csv" ]; then
+        echo "scoring $(basename "$newest") on the validation family and the thin sheets"
+        stem=$(basename "$newest" .safetensors)
+        if score_sets "$newest" >"$score/candidate.log" 2>&1; then
+            for set in $sets; do
+                printf '## %s, 64^3, centred\n\n' "$set"
+                cat "$score/$set/$stem.md"
+                echo
+            done >"${OUT:-/tmp}/score.md"
+            cat "${OUT:-/tmp}/score.md"
+        else
+            tail -n 5 "$score/candidate.log"
+        fi
     else
         echo "no checkpoint or no reference to score"; tail -n 5 "$score/shipped.log" || true
     fi

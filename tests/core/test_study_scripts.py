@@ -536,17 +536,17 @@ def test_layered_caps_are_closed_and_their_flat_faces_lie_whole_layers_apart():
 
 
 @pytest.mark.slow
-def test_the_family_scored_in_shards_gives_the_rows_of_one_eval(tmp_path):
-    """research/score_family_parallel.sh: shards made from their own first seeds are the family's
-    shapes, and their merged rows are those of one `agndc eval` of the whole family."""
+def test_a_set_scored_in_shards_gives_the_rows_of_one_eval(tmp_path):
+    """research/score_validation_parallel.sh: shards made from their own first seeds are the
+    set's shapes, and their merged rows are those of one `agndc eval` of the whole set."""
     python = sys.executable
-    env = {**os.environ, "AGNDC_PYTHON": python, "AGNDC_FAMILY_SIZE": "2"}
-    script = REPO / "research" / "score_family_parallel.sh"
-    subprocess.run(["bash", str(script), tmp_path / "val", tmp_path / "out", "2"], check=True,
-                   env=env, capture_output=True)
+    env = {**os.environ, "AGNDC_PYTHON": python, "AGNDC_SET_SIZE": "2"}
+    script = REPO / "research" / "score_validation_parallel.sh"
+    subprocess.run(["bash", str(script), "sheets", tmp_path / "val", tmp_path / "out", "2"],
+                   check=True, env=env, capture_output=True)
     cli = [python, "-m", "agndc_core.cli"]
-    subprocess.run([*cli, "val-data", "-o", tmp_path / "whole", "-n", "2", "--workers", "1"],
-                   check=True, capture_output=True, cwd=REPO)
+    subprocess.run([*cli, "val-data", "--sheets", "-o", tmp_path / "whole", "-n", "2",
+                    "--workers", "1"], check=True, capture_output=True, cwd=REPO)
     subprocess.run([*cli, "eval", tmp_path / "whole", "--res", "64", "--methods",
                     "mc,oracle_binary,agndc", "--samples", "30000", "-o", tmp_path / "one"],
                    check=True, capture_output=True, cwd=REPO)
@@ -556,14 +556,14 @@ def test_the_family_scored_in_shards_gives_the_rows_of_one_eval(tmp_path):
             return [(r["name"], r["category"], r["method"], r["cd"], r["ef1"])
                     for r in csv.DictReader(f)]
 
-    sharded = rows(tmp_path / "out" / "shipped" / "rows.csv")
+    sharded = rows(tmp_path / "out" / "sheets" / "shipped" / "rows.csv")
     assert len(sharded) == 6 and sharded == rows(tmp_path / "one" / "rows.csv")
     # a checkpoint against that reference: its comparison is printed and written
     weights = REPO / "agndc_core" / "weights" / "agndc.safetensors"
-    done = subprocess.run(["bash", str(script), tmp_path / "val", tmp_path / "out", "2", weights],
-                          check=True, env=env, capture_output=True, text=True)
+    done = subprocess.run(["bash", str(script), "sheets", tmp_path / "val", tmp_path / "out", "2",
+                           weights], check=True, env=env, capture_output=True, text=True)
     assert "CD below the reference's on 0 of 2 grids" in done.stdout
-    assert (tmp_path / "out" / "agndc.md").read_text() == done.stdout
+    assert (tmp_path / "out" / "sheets" / "agndc.md").read_text() == done.stdout
 
 
 def test_a_grids_voxel_surface_is_closed_outward_and_holds_its_voxels():
