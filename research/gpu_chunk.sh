@@ -29,7 +29,8 @@
 # one) scored on the validation family and the thin sheets beside the shipped weights once the
 # wait is over (research/score_validation_parallel.sh on SHARDS processes, a divisor of 24, e.g.
 # 6: the shipped weights' rows are made while the trainer runs), the comparisons in
-# $OUT/score.md. Leave ~1-2 minutes of SECONDS' time for it after the trainer's --max-minutes.
+# $OUT/score.md (which then holds the benchmark's table too, in place of throughput.txt). Leave
+# ~1-2 minutes of SECONDS' time for it after the trainer's --max-minutes.
 # AGNDC_BENCH=MODE:BATCH,...: before the trainer starts, while the data is generated (12
 # workers), benchmarks/bench_training_throughput.py times those variants (eager or a
 # `--compile` mode, and a batch size; the first is the baseline) on the held-out samples and
@@ -154,8 +155,8 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
         start_datagen 12
         timeout "${AGNDC_BENCH_SECONDS:-240}" "$py" benchmarks/bench_training_throughput.py \
             --data "$data/val" --device "${AGNDC_BENCH_DEVICE:-cuda}" --variants "$AGNDC_BENCH" \
-            --width "${AGNDC_BENCH_WIDTH:-16}" --steps 20 --warmup 3 --threads 2 2>&1 | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" \
-            || true
+            --width "${AGNDC_BENCH_WIDTH:-16}" --steps 20 --warmup 3 --threads 2 2>&1 \
+            | tee "${OUT:-/tmp/agndc_runs}/throughput.txt" || true
     fi
     while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$train" --resolutions "$resolutions" --wrinkled "$wrinkled" \
@@ -202,6 +203,12 @@ if [ -n "${AGNDC_SCORE:-}" ] && [ -z "$study" ] && [ -f "$score.pid" ]; then
                 echo
             done >"${OUT:-/tmp}/score.md"
             cat "${OUT:-/tmp}/score.md"
+            # one file fewer of the 8 that come back: the benchmark's table joins the scores
+            if [ -f "${OUT:-/tmp}/throughput.txt" ]; then
+                { echo "## throughput"; echo; cat "${OUT:-/tmp}/throughput.txt"; } \
+                    >>"${OUT:-/tmp}/score.md"
+                rm "${OUT:-/tmp}/throughput.txt"
+            fi
         else
             tail -n 5 "$score/candidate.log"
         fi
