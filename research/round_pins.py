@@ -7,9 +7,11 @@ A cylinder of height 1 (the longest side: 62 voxels at 64³ inside the voxeliser
 each radius in voxels, its axis along z or tilted by ``--tilt`` degrees, voxelised on
 ``--shifts`` random sub-voxel shifts (seeded) and remeshed from its grid alone by marching cubes,
 UNDC and AGNDC. Printed per radius: the mean CD×10⁵ of each and on how many shifts AGNDC beats
-UNDC. ``--stages`` adds AGNDC and UNDC without the flat patches and AGNDC without the normal
-filter. docs/experiments/flat-patches.md ("Known loss: the cap strips of thin round parts") has
-the measurements.
+UNDC. ``--stages`` adds AGNDC and UNDC without the flat patches (and with them the terraced planes
+and stepped floors), AGNDC without the normal filter and AGNDC without the terraced planes.
+``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule.
+docs/experiments/flat-patches.md ("Known loss: thin round parts along an axis") has the
+measurements.
 """
 
 from __future__ import annotations
@@ -38,8 +40,16 @@ def main() -> None:
     parser.add_argument("--shifts", type=int, default=8)
     parser.add_argument("--samples", type=int, default=30000)
     parser.add_argument("--stages", action="store_true")
+    parser.add_argument("--round-strips", default="", metavar="WIDTH,SHARE",
+                        help="research/round_strips.py's rule in the flat-patch stage")
     args = parser.parse_args()
+    if args.round_strips:
+        from round_strips import enable
 
+        width, share = args.round_strips.split(",")
+        enable(int(width), float(share))
+
+    from agndc_core import pipeline
     from agndc_core.metrics import evaluate
     from agndc_core.pipeline import remesh_mesh
 
@@ -49,7 +59,8 @@ def main() -> None:
         variants.update({
             "undc, no flat patches": {"method": "undc", "flat_patches": False},
             "agndc, no flat patches": {"method": "agndc", "flat_patches": False},
-            "agndc, no normal filter": {"method": "agndc", "normal_filter": False}})
+            "agndc, no normal filter": {"method": "agndc", "normal_filter": False},
+            "agndc, no terraced planes": {"method": "agndc", "terraced_planes": False}})
     rng = np.random.default_rng(5)
     shifts = [tuple(rng.uniform(-0.5, 0.5, 3)) for _ in range(args.shifts)]
     for radius in (float(r) for r in args.radii.split(",")):
@@ -57,8 +68,12 @@ def main() -> None:
         cds = {name: [] for name in variants}
         for shift in shifts:
             for name, options in variants.items():
+                options = dict(options)
+                # the terraced-planes stage has no option of its own: the pipeline's switch
+                pipeline.TERRACED_PLANES = options.pop("terraced_planes", True)
                 out = remesh_mesh(vertices, faces, resolution=64, source_bounds=False,
                                   shift=shift, **options)
+                pipeline.TERRACED_PLANES = True
                 metrics = evaluate(out.vertices, out.faces, vertices, faces,
                                    n_samples=args.samples)
                 cds[name].append(1e5 * metrics["cd"])

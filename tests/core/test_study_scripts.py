@@ -583,3 +583,37 @@ def test_a_grids_voxel_surface_is_closed_outward_and_holds_its_voxels():
     # voxel centres at the affine's index points, so the faces lie half a voxel beyond them
     np.testing.assert_allclose(mesh.bounds, [[10 + 2 * 0.5, 2 * 1.5, -4 + 2 * 0.5],
                                              [10 + 2 * 3.5, 2 * 4.5, -4 + 2 * 3.5]])
+
+
+def test_round_strips_are_a_thin_cylinders_sides_not_a_boxs_faces():
+    import numpy as np
+    from scipy import ndimage
+
+    from agndc_core.flatpatches import _IN_PLANE, _pure_splits_last
+    from agndc_core.grid import pad_to_lattice
+
+    script = research_script("round_strips")
+
+    def round_patches(occupancy):
+        lattice = pad_to_lattice(occupancy)
+        found = []
+        for axis in range(3):
+            points = np.moveaxis(lattice, axis, -1)
+            for lower_inside in (True, False):
+                split = _pure_splits_last(points, lower_inside)
+                patches, count = ndimage.label(split, _IN_PLANE)
+                found.append(script.round_strip_patches(points, lower_inside, split, patches,
+                                                        count, 8, 0.5)[1:])
+        return found
+
+    box = np.zeros((20, 16, 30), dtype=bool)
+    box[3:9, 4:12, 2:27] = True  # a bar 6 x 8 voxels across: its faces are narrow, and flat
+    assert not any(r.any() for r in round_patches(box))
+    x, y = np.mgrid[:20, :20] - 9.5
+    disc = x ** 2 + y ** 2 <= 5.2 ** 2
+    rod = np.zeros((20, 20, 30), dtype=bool)
+    rod[disc] = True
+    rod[..., :2] = rod[..., -2:] = False  # a rod of radius ~5 along z, capped
+    found = round_patches(rod)
+    # the four sides facing x and y are round strips; the caps (z) are flat
+    assert all(r.any() for r in found[:4]) and not found[4].any() and not found[5].any()
