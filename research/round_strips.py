@@ -1,6 +1,7 @@
 """A study: the flat-patch stage leaves the strips of thin round parts to the network.
 
     .venv/bin/python research/round_strips.py DATA -o OUT [--max-width 8] [--wall-share 0.5]
+        [--no-terraced-planes]
     .venv/bin/python research/round_pins.py --round-strips 8,0.5 ...
 
 On a binary grid, the side of an axis-aligned cylinder a few voxels in radius that faces an axis
@@ -115,8 +116,14 @@ def main() -> None:
     parser = eval_parser(__doc__, methods=True)
     parser.add_argument("--max-width", type=int, default=8)
     parser.add_argument("--wall-share", type=float, default=0.5)
+    parser.add_argument("--no-terraced-planes", action="store_true",
+                        help="and without the terraced-planes stage (--max-width 0: that alone)")
     args = parser.parse_args()
     enable(args.max_width, args.wall_share)
+    if args.no_terraced_planes:
+        from agndc_core import pipeline
+
+        pipeline.TERRACED_PLANES = False
     run_eval(args)
 
 

@@ -617,3 +617,23 @@ def test_round_strips_are_a_thin_cylinders_sides_not_a_boxs_faces():
     found = round_patches(rod)
     # the four sides facing x and y are round strips; the caps (z) are flat
     assert all(r.any() for r in found[:4]) and not found[4].any() and not found[5].any()
+
+
+def test_pin_plates_are_closed_and_their_round_sides_stand_along_the_axes():
+    """axis_pins: a closed plate with round pins (and a shaft on odd seeds) whose sides stand
+    along the grid axes; the same shape for the same seed."""
+    import numpy as np
+    import trimesh
+
+    script = research_script("axis_pins")
+    for seed in (0, 1):
+        vertices, faces = script.pin_plate(seed)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        assert abs(np.ptp(vertices, axis=0).max() - 1.0) < 1e-12
+        normals = mesh.face_normals
+        # round sides: faces whose normal is off every axis but square to one of them
+        round_side = (np.abs(normals).max(axis=1) < 0.99) & (np.abs(normals).min(axis=1) < 1e-6)
+        assert round_side.sum() > 100
+        assert (np.abs(normals).min(axis=1) < 1e-6).all()  # nothing tilted off the axes
+        np.testing.assert_array_equal(vertices, script.pin_plate(seed)[0])
