@@ -44,6 +44,8 @@ def round_strip_patches(points: np.ndarray, lower_inside: bool, split: np.ndarra
 
     points: (A, B, L + 1) bool lattice points, split axis last; split, patches: (A - 1, B - 1,
     L) the pure splits of this kind and their patch labels (0: none)."""
+    from scipy import ndimage
+
     inward = -1 if lower_inside else 1  # the layer on the inside of such a face
     edges = np.zeros(count + 1)
     walls = np.zeros(count + 1)
@@ -64,21 +66,14 @@ def round_strip_patches(points: np.ndarray, lower_inside: bool, split: np.ndarra
             valid[tuple(index)] = False
             edges += np.bincount(patches[edge], minlength=count + 1)
             walls += np.bincount(patches[edge & below & valid], minlength=count + 1)
-    labels = np.arange(1, count + 1)
-    width = np.full(count + 1, np.inf)
-    for found, box in zip(labels, _boxes(patches, count)):
+    width = np.full(count + 1, np.inf)  # cells across, in the narrower in-plane direction
+    for label, box in enumerate(ndimage.find_objects(patches, max_label=count), start=1):
         if box is not None:
-            width[found] = min(box[0].stop - box[0].start, box[1].stop - box[1].start)
+            width[label] = min(box[0].stop - box[0].start, box[1].stop - box[1].start)
     share = np.divide(walls, edges, out=np.ones(count + 1), where=edges > 0)
     round_ = (width <= max_width) & (share < wall_share)
     round_[0] = False
     return round_
-
-
-def _boxes(patches: np.ndarray, count: int):
-    from scipy import ndimage
-
-    return ndimage.find_objects(patches, max_label=count)
 
 
 def enable(max_width: int, wall_share: float) -> None:
@@ -94,6 +89,8 @@ def enable(max_width: int, wall_share: float) -> None:
         terrace_patches,
     )
 
+    # flatpatches._flatten_slab with one line more (the round patches left alone, as terraces
+    # are); the other stages, which read terrace_patches too, are untouched
     def flatten_slab(points, coord, lower_inside, written, by_mean, pin=None):
         split = _pure_splits_last(points, lower_inside)
         patches, count = ndimage.label(split, _IN_PLANE)

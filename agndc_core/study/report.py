@@ -466,7 +466,8 @@ SYNTHETIC_SHAPES = {ROTATED_BOX: rotated_box, TILTED_BRACKET: tilted_bracket}
 
 
 def voxel_faces(grid):
-    """Boundary quads of the occupied voxels (as triangles) in world coordinates."""
+    """Boundary quads of the occupied voxels (as triangles, facing out of the voxels) in world
+    coordinates: a closed, outward surface, the voxel model itself."""
     occ = np.pad(grid.occupancy, 1)
     corners = []
     for axis in range(3):
@@ -480,6 +481,10 @@ def voxel_faces(grid):
             quad[:, n] = base
             quad[:, n, u] += du
             quad[:, n, v] += dv
+        # the corners' order turns the quad's normal to e_u x e_v: +x, -y, +z for axes 0, 1,
+        # 2; a face out of the voxels points down the axis where the voxels begin (+1)
+        outward = -change[tuple(idx.T)] * (-1 if axis == 1 else 1)
+        quad[outward < 0] = quad[outward < 0, ::-1]
         corners.append(quad)
     quads = np.concatenate(corners)
     verts = grid.index_to_world(quads.reshape(-1, 3))

@@ -53,6 +53,21 @@ def test_voxel_faces_of_a_block_is_its_closed_box():
     assert np.allclose(mesh.bounds[0], [1.0 + 0.25, 2.0 + 0.25, 3.0 + 0.75])
 
 
+def test_voxel_faces_face_out_of_the_voxels_under_any_affine():
+    occupancy = np.zeros((5, 6, 7), dtype=bool)
+    occupancy[1:4, 2:5, 1:3] = True
+    occupancy[2, 2, 3] = True  # one voxel on top
+    affine = np.diag([2.0, 2.0, 2.0, 1.0])
+    affine[:3, 3] = (10.0, 0.0, -4.0)
+    vertices, faces = voxel_faces(VoxelGrid(occupancy, affine))
+    mesh = trimesh.Trimesh(vertices, faces)  # merges the quads' shared corners
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert mesh.volume == pytest.approx(occupancy.sum() * 8.0)  # outward: positive volume
+    # voxel centres at the affine's index points, so the faces lie half a voxel beyond them
+    np.testing.assert_allclose(mesh.bounds, [[10 + 2 * 0.5, 2 * 1.5, -4 + 2 * 0.5],
+                                             [10 + 2 * 3.5, 2 * 4.5, -4 + 2 * 3.5]])
+
+
 def summary(method, cd, ef1):
     return {"method": method, "cd": cd, "f1": 0.5, "nc": 0.9, "ecd": 0.1, "ef1": ef1}
 

@@ -566,25 +566,6 @@ def test_a_set_scored_in_shards_gives_the_rows_of_one_eval(tmp_path):
     assert (tmp_path / "out" / "sheets" / "agndc.md").read_text() == done.stdout
 
 
-def test_a_grids_voxel_surface_is_closed_outward_and_holds_its_voxels():
-    import numpy as np
-    import trimesh
-
-    script = research_script("grid_input_faces")
-    occupancy = np.zeros((5, 6, 7), dtype=bool)
-    occupancy[1:4, 2:5, 1:3] = True
-    occupancy[2, 2, 3] = True  # one voxel on top
-    affine = np.diag([2.0, 2.0, 2.0, 1.0])
-    affine[:3, 3] = (10.0, 0.0, -4.0)
-    vertices, faces = script.voxel_surface(occupancy, affine)
-    mesh = trimesh.Trimesh(vertices, faces)  # merges the quads' shared corners
-    assert mesh.is_watertight and mesh.is_winding_consistent
-    assert mesh.volume == pytest.approx(occupancy.sum() * 8.0)  # outward: positive volume
-    # voxel centres at the affine's index points, so the faces lie half a voxel beyond them
-    np.testing.assert_allclose(mesh.bounds, [[10 + 2 * 0.5, 2 * 1.5, -4 + 2 * 0.5],
-                                             [10 + 2 * 3.5, 2 * 4.5, -4 + 2 * 3.5]])
-
-
 def test_round_strips_are_a_thin_cylinders_sides_not_a_boxs_faces():
     import numpy as np
     from scipy import ndimage
