@@ -10,7 +10,7 @@ the validation family's shapes as grids (``pipeline.remesh``, the grid input pat
 bounds) in two frames, each with the rule as shipped and with every flat patch mid-layer:
 
 * ``voxel``: a voxel model. The grid of each mesh at ``--res`` (centred), and the truth is the
-  grid's own voxel surface (its exposed voxel faces), whose flat faces all lie mid-layer;
+  grid's own voxel surface (``report.voxel_faces``), whose flat faces all lie mid-layer;
 * ``mask``: a segmentation mask. The grid of each mesh at ``--res`` moved by a random sub-voxel
   shift (seeded per shape), so where a face lies in its layer is unknown, and the truth is the
   mesh.
@@ -28,34 +28,6 @@ from pathlib import Path
 from unittest import mock
 
 import numpy as np
-
-
-def voxel_surface(occupancy: np.ndarray, affine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(vertices, faces) of a grid's exposed voxel faces, two triangles each, in world
-    coordinates (voxel centres at the affine's index points, so faces lie half a voxel off)."""
-    padded = np.pad(occupancy, 1)
-    quads = []
-    for axis in range(3):
-        # a face between index i and i + 1 along ``axis`` where exactly one of them is inside
-        lo = np.take(padded, range(padded.shape[axis] - 1), axis=axis)
-        hi = np.take(padded, range(1, padded.shape[axis]), axis=axis)
-        for outward, cells in ((1, lo & ~hi), (-1, hi & ~lo)):
-            index = np.argwhere(cells).astype(float) - 1.0  # back to unpadded indices
-            index[:, axis] += 0.5  # the face's plane
-            u, v = [a for a in range(3) if a != axis]
-            corners = np.repeat(index[:, None, :], 4, axis=1)
-            for k, (du, dv) in enumerate(((-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5))):
-                corners[:, k, u] += du
-                corners[:, k, v] += dv
-            # the quad's winding gives the normal e_u x e_v: +x, -y, +z for axes 0, 1, 2
-            if outward * (-1 if axis == 1 else 1) < 0:
-                corners = corners[:, ::-1]
-            quads.append(corners)
-    corners = np.concatenate(quads)  # (Q, 4, 3)
-    world = corners.reshape(-1, 3) @ affine[:3, :3].T + affine[:3, 3]
-    base = 4 * np.arange(len(corners))[:, None]
-    faces = np.concatenate([base + [0, 1, 2], base + [0, 2, 3]])
-    return world, faces
 
 
 def all_mid_layer(lattice: np.ndarray, axis: int):
@@ -81,6 +53,7 @@ def main() -> None:
     from agndc_core.metrics import evaluate
     from agndc_core.pipeline import remesh
     from agndc_core.study.evaluate import METRIC_COLUMNS, find_meshes, summarize_rows
+    from agndc_core.study.report import voxel_faces
     from agndc_core.voxelize import voxelize
 
     meshes = find_meshes(Path(args.folder))
@@ -93,8 +66,7 @@ def main() -> None:
                 shift = tuple(np.random.default_rng(index).uniform(-0.5, 0.5, 3))
             voxelised = voxelize(vertices, faces, args.res, shift=shift)
             grid = VoxelGrid(voxelised.occupancy, voxelised.affine, source=Path(path).name)
-            truth = (voxel_surface(grid.occupancy, grid.affine) if frame == "voxel"
-                     else (vertices, faces))
+            truth = voxel_faces(grid) if frame == "voxel" else (vertices, faces)
             for label in ("mc", "agndc", "agndc_mid"):
                 method = "mc" if label == "mc" else "agndc"
                 if label == "agndc_mid":
