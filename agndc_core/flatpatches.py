@@ -623,12 +623,29 @@ def _fit_planes_of_kind(points, offsets, lower_inside: bool, pin=None) -> None:
     bend = _bends(u, v, h, fitted, surface, n_surfaces)
     is_plane = (np.bincount(surface, outside, n_surfaces) == 0) & (spans >= 2) \
         & (residual <= tol.terrace_residual ** 2 * np.maximum(size, 1)) \
-        & (bend <= tol.terrace_bend)
+        & (bend <= tol.terrace_bend) \
+        & ~_round(size, residual / np.maximum(size, 1), bend)
     keep = is_plane[surface]
     index = tuple(c[keep] for c in cells)
     offsets[0][index] = np.clip(local[keep], 0.0, 1.0)
     if pin is not None:
         pin[index] = True
+
+
+def _round(size, mean_square, bend):
+    """Whether each terraced surface is round rather than a plane seen through its terraces:
+    at least ``tol.terrace_round_cells`` cells whose vertices' spread about their plane
+    (``mean_square``, voxels²) is at least ``tol.terrace_round_share`` explained by their best
+    quadratic surface, which bends from the plane by at least ``tol.terrace_round_bend``.
+
+    A network that follows a tilted plane's terraces leaves a staircase about the plane, which a
+    quadratic surface follows only in part; the side of a cylinder along an axis, where it faces
+    another axis, reaches the grid as terraces too (its top one and a strip beside it), and the
+    network's vertices follow its curve, which the quadratic surface does almost wholly.
+    Arrays of one value per surface, or scalars."""
+    return (np.asarray(size) >= tol.terrace_round_cells) \
+        & (np.asarray(bend) >= tol.terrace_round_bend) \
+        & (np.square(bend) >= tol.terrace_round_share * np.asarray(mean_square))
 
 
 def _terraced_surfaces(patches, terrace, cells, count: int) -> np.ndarray:
@@ -799,7 +816,9 @@ def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.nda
             if (layer.max() - layer.min() + 1 >= 2
                     and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
                     and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2
-                    and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend):
+                    and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend
+                    and not _round(len(cells), np.mean((h - fitted) ** 2),
+                                   np.sqrt(np.mean((quadratic - fitted) ** 2)))):
                 for cell, value in zip(cells, np.clip(local, 0.0, 1.0)):
                     out[cell][axis] = value
     return out

@@ -37,6 +37,12 @@ class Tolerances:
     # (a gently curved surface through the same layers is not flattened; a tilted face with
     # only 2-3 terraces bends its quadratic fit by up to 0.25 following the steps)
     terrace_bend: float = 0.3
+    # ... and it is not round: a surface of at least terrace_round_cells cells whose vertices'
+    # spread about the plane is at least terrace_round_share explained by a quadratic surface
+    # bending from it by at least terrace_round_bend voxels RMS (flatpatches._round)
+    terrace_round_cells: int = 50
+    terrace_round_bend: float = 0.1
+    terrace_round_share: float = 0.9
     # passes of alternating projections that move a terraced surface's least-squares plane
     # into its cells' layers (flatpatches._into_layers)
     terrace_projections: int = 100

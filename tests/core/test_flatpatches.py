@@ -474,6 +474,46 @@ def test_a_plane_tilted_one_degree_is_fitted_inside_its_layers(monkeypatch):
     np.testing.assert_allclose(out, naive, atol=1e-5)
 
 
+def cylinder_side(radius=7.4, centre=(10.4, 2.8), shape=(22, 40, 14)):
+    """Points inside a cylinder along y, its top side facing +z, and the vertices of a network
+    that follows the curve there (each z-split cell at the true height over its centre)."""
+    x, y, z = np.indices(shape, dtype=np.float64)
+    lattice = (x - centre[0]) ** 2 + (z - centre[1]) ** 2 < radius ** 2
+    column = np.arange(shape[0])[:, None, None] + 0.5
+    top = centre[1] + np.sqrt(np.maximum(radius ** 2 - (column - centre[0]) ** 2, 0.0))
+    vertex = np.full(shape + (3,), 0.5, dtype=np.float32)
+    vertex[..., 2] = np.clip(top - np.arange(shape[2])[None, None, :], 0.0, 1.0)
+    return lattice, vertex
+
+
+def test_a_round_side_is_not_fitted_as_a_plane(monkeypatch):
+    """The top of a cylinder along an axis reaches the grid as terraces (its top one and a strip
+    beside it, one layer down), which pass the plane tests; the vertices follow the curve, which
+    a quadratic surface explains, so the surface is left round. With the round test off the
+    same surface is flattened (the test can fail)."""
+    lattice, vertex = cylinder_side()
+
+    def pinned_along_z():
+        pinned = np.zeros(vertex.shape, dtype=bool)
+        out = flatpatches.fit_terraced_planes(lattice, vertex, pinned=pinned)
+        np.testing.assert_allclose(out, flatpatches.fit_terraced_planes_naive(lattice, vertex),
+                                   atol=1e-5)
+        return int(np.count_nonzero(pinned[..., 2]))
+
+    assert pinned_along_z() == 0
+    monkeypatch.setattr(tol, "terrace_round_share", 2.0)  # no surface is round
+    assert pinned_along_z() > 100
+
+
+def test_round_needs_cells_a_bend_and_the_share_explained():
+    cells, bend = tol.terrace_round_cells, tol.terrace_round_bend
+    spread = bend ** 2 / tol.terrace_round_share  # the most spread the bend explains enough
+    assert flatpatches._round(cells, spread, bend)
+    assert not flatpatches._round(cells - 1, spread, bend)  # too few cells
+    assert not flatpatches._round(cells, 0.9 * spread, 0.9 * bend)  # too little bend
+    assert not flatpatches._round(cells, 1.2 * spread, bend)  # a staircase left unexplained
+
+
 def test_a_tilted_box_face_remeshed_is_flat():
     """Through remesh with the shipped network: a box face tilted 2° off an axis comes out
     flat (its vertices within a few hundredths of a voxel of one plane), where the network
