@@ -574,7 +574,10 @@ def fit_terraced_planes(lattice: np.ndarray, vertex: np.ndarray, *, in_place: bo
     that plane crosses every one of its cells within the cell's layer (``tol.terrace_slack``),
     the vertices lie within ``tol.terrace_residual`` voxels RMS of it, and their best quadratic
     surface bends away from it by at most ``tol.terrace_bend``: a curved surface steps through
-    its layers unevenly or bends, and is left to the network. The cells of a plane then
+    its layers unevenly or bends, and is left to the network. A surface whose vertices follow a
+    curve that a quadratic surface explains (``_round``: the side of a cylinder along an axis,
+    whose top terrace and a strip beside it pass the tests above) is left too. The cells of a
+    plane then
     take the plane's coordinate at their own position; the one-cell risers between its terraces
     keep the network's, and the normal filter lines them up with the pinned terraces around
     them (measured: a 2°-4° face 0.005-0.008 voxel RMS about its plane; fitting the risers too

@@ -39,7 +39,10 @@ class Tolerances:
     terrace_bend: float = 0.3
     # ... and it is not round: a surface of at least terrace_round_cells cells whose vertices'
     # spread about the plane is at least terrace_round_share explained by a quadratic surface
-    # bending from it by at least terrace_round_bend voxels RMS (flatpatches._round)
+    # bending from it by at least terrace_round_bend voxels RMS (flatpatches._round). Chosen on
+    # a frame of plates with pins along the axes and the validation family at 64³ (pins 6.905 ->
+    # 6.836, family 6.973 -> 6.972; share 0.95 or 30 cells and 0.85 no better;
+    # docs/experiments/terraced-planes.md, "Round sides left round")
     terrace_round_cells: int = 50
     terrace_round_bend: float = 0.1
     terrace_round_share: float = 0.9

@@ -10,6 +10,9 @@ UNDC and AGNDC. Printed per radius: the mean CD×10⁵ of each and on how many s
 UNDC. ``--stages`` adds AGNDC and UNDC without the flat patches (and with them the terraced planes
 and stepped floors), AGNDC without the normal filter and AGNDC without the terraced planes.
 ``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule.
+``--figure PNG`` draws instead the first radius's cylinder on the grid shifted by ``--shift``,
+by AGNDC without and with the terraced planes' round test (``flatpatches._round``), flat-shaded,
+seen along its axis.
 docs/experiments/flat-patches.md ("Known loss: thin round parts along an axis") has the
 measurements.
 """
@@ -33,6 +36,37 @@ def cylinder(radius_voxels: float, tilt_degrees: float, voxels: int = 62):
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
+def figure(radius: float, tilt: float, shift: tuple, out: str) -> None:
+    """Draw the cylinder remeshed by AGNDC without and with the round test, side by side."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from agndc_core.pipeline import remesh_mesh
+    from agndc_core.study.report import _draw, save_small_png
+    from agndc_core.tolerances import tol
+
+    vertices, faces = cylinder(radius, tilt)
+    fig = plt.figure(figsize=(8.0, 4.2), dpi=90)
+    share = tol.terrace_round_share
+    for col, (title, round_share) in enumerate((("AGNDC, no round test", 2.0),
+                                                ("AGNDC with the round test", share))):
+        tol.terrace_round_share = round_share  # above 1 no surface is round
+        out_mesh = remesh_mesh(vertices, faces, resolution=64, source_bounds=False, shift=shift)
+        tol.terrace_round_share = share
+        # the top fifth of the cylinder, from above at a slant: the cap's outline and the side
+        top = vertices[:, 2].max() - 0.2
+        kept = out_mesh.faces[(out_mesh.vertices[out_mesh.faces][..., 2] > top).all(1)]
+        ax = fig.add_subplot(1, 2, col + 1, projection="3d")
+        _draw(ax, out_mesh.vertices, kept, vertices[vertices[:, 2] > top])
+        ax.view_init(elev=50, azim=-60)
+        ax.set_title(title, fontsize=9)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.92, wspace=0)
+    save_small_png(fig, out)
+    print(out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--radii", default="3.5,5,6,7.4,11.8")
@@ -42,7 +76,14 @@ def main() -> None:
     parser.add_argument("--stages", action="store_true")
     parser.add_argument("--round-strips", default="", metavar="WIDTH,SHARE",
                         help="research/round_strips.py's rule in the flat-patch stage")
+    parser.add_argument("--figure", default="", metavar="PNG")
+    parser.add_argument("--shift", default="-0.21,-0.45,-0.12", metavar="X,Y,Z",
+                        help="the grid's shift for --figure, voxels")
     args = parser.parse_args()
+    if args.figure:
+        figure(float(args.radii.split(",")[0]), args.tilt,
+               tuple(float(x) for x in args.shift.split(",")), args.figure)
+        return
     if args.round_strips:
         from round_strips import enable
 
