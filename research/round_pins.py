@@ -9,7 +9,8 @@ each radius in voxels, its axis along z or tilted by ``--tilt`` degrees, voxelis
 UNDC and AGNDC. Printed per radius: the mean CD×10⁵ of each and on how many shifts AGNDC beats
 UNDC. ``--stages`` adds AGNDC and UNDC without the flat patches (and with them the terraced planes
 and stepped floors), AGNDC without the normal filter and AGNDC without the terraced planes.
-``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule.
+``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule,
+``--quadratic-strips CELLS,BEND,SHARE`` with its ``--quadratic`` rule.
 ``--figure PNG`` draws instead the first radius's cylinder on the grid shifted by ``--shift``,
 by AGNDC without and with the terraced planes' round test (``flatpatches._round``), flat-shaded,
 seen along its axis.
@@ -76,6 +77,8 @@ def main() -> None:
     parser.add_argument("--stages", action="store_true")
     parser.add_argument("--round-strips", default="", metavar="WIDTH,SHARE",
                         help="research/round_strips.py's rule in the flat-patch stage")
+    parser.add_argument("--quadratic-strips", default="", metavar="CELLS,BEND,SHARE",
+                        help="research/round_strips.py --quadratic's rule in the flat-patch stage")
     parser.add_argument("--figure", default="", metavar="PNG")
     parser.add_argument("--shift", default="-0.21,-0.45,-0.12", metavar="X,Y,Z",
                         help="the grid's shift for --figure, voxels")
@@ -89,6 +92,11 @@ def main() -> None:
 
         width, share = args.round_strips.split(",")
         enable(int(width), float(share))
+    if args.quadratic_strips:
+        from round_strips import enable_quadratic
+
+        cells, bend, share = args.quadratic_strips.split(",")
+        enable_quadratic(int(cells), float(bend), float(share))
 
     from agndc_core import pipeline
     from agndc_core.metrics import evaluate

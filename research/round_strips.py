@@ -109,14 +109,73 @@ def enable(max_width: int, wall_share: float) -> None:
     flatpatches._flatten_slab = flatten_slab
 
 
+def quadratic_round_patches(cells, depth, patch_of, count: int, min_cells: int,
+                            min_bend: float, min_share: float) -> np.ndarray:
+    """(count + 1,) bool: the patches whose network depths bow like a round strip: at least
+    ``min_cells`` cells, their best quadratic surface bending from their mean by at least
+    ``min_bend`` voxels RMS and explaining at least ``min_share`` of their spread about it (the
+    terraced planes' round test, ``flatpatches._round``, about the patch's flat mean)."""
+    from agndc_core.flatpatches import _bends
+
+    n = count + 1
+    size = np.bincount(patch_of, minlength=n)
+    mean = np.bincount(patch_of, depth, n) / np.maximum(size, 1)
+    flat = mean[patch_of]
+    spread = np.bincount(patch_of, (depth - flat) ** 2, n) / np.maximum(size, 1)
+    u, v = cells[0].astype(np.float64), cells[1].astype(np.float64)
+    bend = _bends(u, v, depth, flat, patch_of, n)
+    round_ = (size >= min_cells) & (bend >= min_bend) & (bend ** 2 >= min_share * spread)
+    round_[0] = False
+    return round_
+
+
+def enable_quadratic(min_cells: int, min_bend: float, min_share: float) -> None:
+    """Put the quadratic rule into ``flatpatches._flatten_slab`` for this process: a patch
+    whose depths bow (``quadratic_round_patches``) is left to the network like a terrace."""
+    from scipy import ndimage
+
+    from agndc_core import flatpatches
+    from agndc_core.flatpatches import (
+        _IN_PLANE,
+        _pure_splits_last,
+        patch_depths,
+        set_patch_depths,
+        terrace_patches,
+    )
+
+    # flatpatches._flatten_slab with the bowed patches left alone, as terraces are
+    def flatten_slab(points, coord, lower_inside, written, by_mean, pin=None):
+        split = _pure_splits_last(points, lower_inside)
+        patches, count = ndimage.label(split, _IN_PLANE)
+        if count == 0:
+            return
+        cells = np.nonzero(split)
+        patch_of = patches[cells]
+        mean = patch_depths(patch_of, coord[cells], count)
+        left = terrace_patches(split, patches, count)
+        left |= quadratic_round_patches(cells, coord[cells].astype(np.float64), patch_of,
+                                        count, min_cells, min_bend, min_share)
+        keep = ~left[patch_of]
+        keep &= (cells[2] >= written.start) & (cells[2] < written.stop)
+        set_patch_depths(coord, pin, cells, patch_of, keep, mean, by_mean)
+
+    flatpatches._flatten_slab = flatten_slab
+
+
 def main() -> None:
     parser = eval_parser(__doc__, methods=True)
     parser.add_argument("--max-width", type=int, default=8)
     parser.add_argument("--wall-share", type=float, default=0.5)
     parser.add_argument("--no-terraced-planes", action="store_true",
                         help="and without the terraced-planes stage (--max-width 0: that alone)")
+    parser.add_argument("--quadratic", default="", metavar="CELLS,BEND,SHARE",
+                        help="instead, leave the patches whose depths bow like a round strip")
     args = parser.parse_args()
-    enable(args.max_width, args.wall_share)
+    if args.quadratic:
+        cells, bend, share = args.quadratic.split(",")
+        enable_quadratic(int(cells), float(bend), float(share))
+    else:
+        enable(args.max_width, args.wall_share)
     if args.no_terraced_planes:
         from agndc_core import pipeline
 
