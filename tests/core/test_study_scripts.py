@@ -600,6 +600,25 @@ def test_round_strips_are_a_thin_cylinders_sides_not_a_boxs_faces():
     assert all(r.any() for r in found[:4]) and not found[4].any() and not found[5].any()
 
 
+def test_quadratic_round_patches_find_bowed_depths_not_noisy_flat_ones():
+    import numpy as np
+
+    script = research_script("round_strips")
+    rng = np.random.default_rng(3)
+    u, v = np.mgrid[:5, :40]  # two strips 5 cells wide, 40 long, patches 1 and 2
+    cells = (np.concatenate([u.ravel(), u.ravel() + 10]), np.concatenate([v.ravel()] * 2),
+             np.zeros(400, dtype=int))
+    patch_of = np.repeat([1, 2], 200)
+    across = u.ravel() - 2.0
+    bowed = 0.6 - 0.1 * across ** 2  # sags 0.4 voxel at its edges, like a cylinder's cap strip
+    flat = 0.5 + rng.normal(0, 0.1, 200)  # the network's noise about a flat face
+    depth = np.concatenate([bowed, flat])
+    found = script.quadratic_round_patches(cells, depth, patch_of, 2, 20, 0.1, 0.9)
+    assert found.tolist() == [False, True, False]
+    # too few cells for the rule: neither
+    assert not script.quadratic_round_patches(cells, depth, patch_of, 2, 201, 0.1, 0.9).any()
+
+
 def test_pin_plates_are_closed_and_their_round_sides_stand_along_the_axes():
     """axis_pins: a closed plate with round pins (and a shaft on odd seeds) whose sides stand
     along the grid axes; the same shape for the same seed."""
