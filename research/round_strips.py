@@ -76,8 +76,11 @@ def round_strip_patches(points: np.ndarray, lower_inside: bool, split: np.ndarra
     return round_
 
 
-def enable(max_width: int, wall_share: float) -> None:
-    """Put the rule into ``flatpatches._flatten_slab`` for this process."""
+def leave_to_network(round_patches) -> None:
+    """Put ``flatpatches._flatten_slab`` with one line more into this process: the patches that
+    ``round_patches(points, lower_inside, split, patches, count, cells, coord)`` marks ((count +
+    1,) bool) are left alone, as terraces are; the other stages, which read terrace_patches
+    too, are untouched."""
     from scipy import ndimage
 
     from agndc_core import flatpatches
@@ -89,8 +92,6 @@ def enable(max_width: int, wall_share: float) -> None:
         terrace_patches,
     )
 
-    # flatpatches._flatten_slab with one line more (the round patches left alone, as terraces
-    # are); the other stages, which read terrace_patches too, are untouched
     def flatten_slab(points, coord, lower_inside, written, by_mean, pin=None):
         split = _pure_splits_last(points, lower_inside)
         patches, count = ndimage.label(split, _IN_PLANE)
@@ -100,13 +101,19 @@ def enable(max_width: int, wall_share: float) -> None:
         patch_of = patches[cells]
         mean = patch_depths(patch_of, coord[cells], count)
         left = terrace_patches(split, patches, count)
-        left |= round_strip_patches(points, lower_inside, split, patches, count, max_width,
-                                    wall_share)
+        left |= round_patches(points, lower_inside, split, patches, count, cells, coord)
         keep = ~left[patch_of]
         keep &= (cells[2] >= written.start) & (cells[2] < written.stop)
         set_patch_depths(coord, pin, cells, patch_of, keep, mean, by_mean)
 
     flatpatches._flatten_slab = flatten_slab
+
+
+def enable(max_width: int, wall_share: float) -> None:
+    """Put the rule into ``flatpatches._flatten_slab`` for this process."""
+    leave_to_network(lambda points, lower_inside, split, patches, count, cells, coord:
+                     round_strip_patches(points, lower_inside, split, patches, count, max_width,
+                                         wall_share))
 
 
 def quadratic_round_patches(cells, depth, patch_of, count: int, min_cells: int,
@@ -132,34 +139,10 @@ def quadratic_round_patches(cells, depth, patch_of, count: int, min_cells: int,
 def enable_quadratic(min_cells: int, min_bend: float, min_share: float) -> None:
     """Put the quadratic rule into ``flatpatches._flatten_slab`` for this process: a patch
     whose depths bow (``quadratic_round_patches``) is left to the network like a terrace."""
-    from scipy import ndimage
-
-    from agndc_core import flatpatches
-    from agndc_core.flatpatches import (
-        _IN_PLANE,
-        _pure_splits_last,
-        patch_depths,
-        set_patch_depths,
-        terrace_patches,
-    )
-
-    # flatpatches._flatten_slab with the bowed patches left alone, as terraces are
-    def flatten_slab(points, coord, lower_inside, written, by_mean, pin=None):
-        split = _pure_splits_last(points, lower_inside)
-        patches, count = ndimage.label(split, _IN_PLANE)
-        if count == 0:
-            return
-        cells = np.nonzero(split)
-        patch_of = patches[cells]
-        mean = patch_depths(patch_of, coord[cells], count)
-        left = terrace_patches(split, patches, count)
-        left |= quadratic_round_patches(cells, coord[cells].astype(np.float64), patch_of,
-                                        count, min_cells, min_bend, min_share)
-        keep = ~left[patch_of]
-        keep &= (cells[2] >= written.start) & (cells[2] < written.stop)
-        set_patch_depths(coord, pin, cells, patch_of, keep, mean, by_mean)
-
-    flatpatches._flatten_slab = flatten_slab
+    leave_to_network(lambda points, lower_inside, split, patches, count, cells, coord:
+                     quadratic_round_patches(cells, coord[cells].astype(np.float64),
+                                             patches[cells], count, min_cells, min_bend,
+                                             min_share))
 
 
 def main() -> None:
