@@ -816,12 +816,13 @@ def fit_terraced_planes_naive(lattice: np.ndarray, vertex: np.ndarray) -> np.nda
             design = np.stack([su * su, su * sv, sv * sv, su, sv, np.ones_like(su)], -1)
             quadratic = design @ (np.linalg.pinv(design.T @ design, rcond=1e-10)
                                   @ (design.T @ h))
+            spread = np.mean((h - fitted) ** 2)
+            bend = np.sqrt(np.mean((quadratic - fitted) ** 2))
             if (layer.max() - layer.min() + 1 >= 2
                     and np.all((local >= -tol.terrace_slack) & (local <= 1 + tol.terrace_slack))
-                    and np.mean((h - fitted) ** 2) <= tol.terrace_residual ** 2
-                    and np.sqrt(np.mean((quadratic - fitted) ** 2)) <= tol.terrace_bend
-                    and not _round(len(cells), np.mean((h - fitted) ** 2),
-                                   np.sqrt(np.mean((quadratic - fitted) ** 2)))):
+                    and spread <= tol.terrace_residual ** 2
+                    and bend <= tol.terrace_bend
+                    and not _round(len(cells), spread, bend)):
                 for cell, value in zip(cells, np.clip(local, 0.0, 1.0)):
                     out[cell][axis] = value
     return out

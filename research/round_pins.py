@@ -12,8 +12,8 @@ and stepped floors), AGNDC without the normal filter and AGNDC without the terra
 ``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule,
 ``--quadratic-strips CELLS,BEND,SHARE`` with its ``--quadratic`` rule.
 ``--figure PNG`` draws instead the first radius's cylinder on the grid shifted by ``--shift``,
-by AGNDC without and with the terraced planes' round test (``flatpatches._round``), flat-shaded,
-seen along its axis.
+by AGNDC without and with the terraced planes' round test (``flatpatches._round``), flat-shaded:
+its top fifth, seen from above at a slant (the cap's outline and the side).
 docs/experiments/flat-patches.md ("Known loss: thin round parts along an axis") has the
 measurements.
 """
