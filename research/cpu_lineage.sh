@@ -19,7 +19,12 @@
 # AGNDC: the teacher's vertices on DATA and the sheets (agndc distil-data), then the student's
 # recipe (docs/training.md, "agndc_fast, distilled"), checkpoints at 1,000, 2,000 and 3,000
 # finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
-# at half the learning rate. A stage is kept short (80-120 min where a step takes ~6 s).
+# at half the learning rate. Stage 18: the shipped UNDC, which remeshes the grids whose AGNDC
+# mesh comes out wrinkled all over (methods.WRINKLED_METHODS), continued 3,000 steps on DATA and
+# 900 shapes half of which carry wrinkles like a scan's (DATA_wrinkled, agndc train-data
+# --wrinkled 0.5) at half its learning rate, checkpoints at 1,000, 2,000 and 3,000
+# (docs/experiments/wrinkled-surfaces.md). A stage is kept short (80-120 min where a step
+# takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
 # shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
@@ -114,6 +119,12 @@ current)
     stage student_agndc16_cont --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16/final.safetensors" --model "$student_config" \
         --steps 3000,0,0 --lr 2.5e-4 --ema 0.99 --seed 22 --val-steps 1000,2000,3000
+    # stage 18: the shipped UNDC (AGNDC's network for wrinkled surfaces) continued on DATA and
+    # the wrinkled shapes at half the learning rate that trained it
+    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
+    stage undc_wrinkled16 --undc --model '{"width": 16}' --data "$data,$wrinkled" \
+        --init agndc_core/weights/undc.safetensors --lr 5e-4 --ema 0.995 --seed 23 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
