@@ -27,9 +27,9 @@ class Method:
             A multiple of the coarsest pooling step (4) keeps the lattice's pooling phase.
         wrinkled_method: the method that remeshes, in its place, a grid whose mesh comes out
             wrinkled all over (``normalfilter.wrinkled_surface``: a scan-like organic shape
-            whose wrinkles are finer than the voxels). There the shipped AGNDC's vertices are
-            lumpier than UNDC's, which was closer on every such shape of the validation family
-            (docs/experiments/wrinkled-surfaces.md).
+            whose wrinkles are finer than the voxels). There the shipped AGNDC smooths away
+            more of the wrinkles than UNDC, which was closer on every such shape of the
+            validation family (docs/experiments/wrinkled-surfaces.md).
     """
 
     name: str

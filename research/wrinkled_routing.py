@@ -2,10 +2,10 @@
 
 ``normalfilter.wrinkled_surface`` picks the meshes the normal filter leaves alone: few vertices
 on planar patches and a middle share on detail, the scan-like organic shapes whose wrinkles are
-finer than the voxels. On them the shipped AGNDC's vertices are lumpier than UNDC's, so the
-pipeline remeshes such a grid with the method ``methods.WRINKLED_METHODS`` names. This study
-scores ``agndc eval`` of AGNDC with that choice replaced (``--instead none``: AGNDC's own mesh,
-as before the choice):
+finer than the voxels. On them the shipped AGNDC smooths away more of the wrinkles than UNDC,
+which is closer to the surface on every such validation shape, so the pipeline remeshes such
+a grid with the method ``methods.WRINKLED_METHODS`` names. This study scores ``agndc eval`` of
+AGNDC with that choice replaced (``--instead none``: AGNDC's own mesh, as before the choice):
 
     .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead none --res 64
     .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead agndc_fast --shifts 3
