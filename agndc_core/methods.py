@@ -25,11 +25,6 @@ class Method:
             next to the high border up to a quarter voxel too far out, and 2-4 more empty points
             there bring it to the low faces' depth (docs/experiments/high-border-margin.md).
             A multiple of the coarsest pooling step (4) keeps the lattice's pooling phase.
-        wrinkled_method: the method that remeshes, in its place, a grid whose mesh comes out
-            wrinkled all over (``normalfilter.wrinkled_surface``: a scan-like organic shape
-            whose wrinkles are finer than the voxels). There the shipped AGNDC smooths away
-            more of the wrinkles than UNDC, which was closer on every such shape of the
-            validation family (docs/experiments/wrinkled-surfaces.md).
     """
 
     name: str
@@ -41,13 +36,11 @@ class Method:
     bounded: bool = False
     in_blender: bool = False
     high_margin: int = 0
-    wrinkled_method: str | None = None
 
 
 REGISTRY = (
     Method("agndc", "AGNDC", "Attention-guided multi-scale neural dual contouring (shipped "
-           "weights)", weights="agndc", bounded=True, in_blender=True, high_margin=4,
-           wrinkled_method="undc"),
+           "weights)", weights="agndc", bounded=True, in_blender=True, high_margin=4),
     Method("agndc_fast", "AGNDC Fast", "AGNDC distilled for speed (no snake convolutions or "
            "attention): 1.5x as fast, as close to the surface, weaker on some creases (shipped "
            "weights)", title="AGNDC fast (distilled)", weights="agndc_student", bounded=True,
@@ -84,7 +77,5 @@ CHECKPOINT_NAMES = {m.name: m.weights for m in REGISTRY if m.weights}
 #: methods whose dual vertices can be put on a voxelised mesh's bounding box
 #: (``remesh(source_bounds=True)``); the oracles keep their own definitions
 BOUNDED_METHODS = tuple(m.name for m in REGISTRY if m.bounded)
-#: {method: the method that remeshes a surface wrinkled all over in its place}
-WRINKLED_METHODS = {m.name: m.wrinkled_method for m in REGISTRY if m.wrinkled_method}
 #: the add-on's methods, in its menu's order
 BLENDER_METHODS = tuple(m.name for m in REGISTRY if m.in_blender)

@@ -77,37 +77,9 @@ class NormalFilter:
 DEFAULT = NormalFilter()
 
 
-@dataclass(frozen=True)
-class Surface:
-    """The filter's reading of a mesh before it moves a vertex (``read_surface``)."""
-
-    original: np.ndarray  # (F, 3) unnormalised face normals of the mesh as it came
-    incidence: sp.csr_matrix  # (V, F) ``vertex_faces``
-    normals: np.ndarray  # (F, 3) bilaterally filtered unit normals
-    spread: np.ndarray | None  # (V,) ``normal_spread`` of them; None without ``planar_v``
-    wrinkled: bool  # ``wrinkled_surface``: the vertex update leaves the mesh as it is
-
-
-def read_surface(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
-                 params: NormalFilter = DEFAULT, check=None,
-                 planar_v: np.ndarray | None = None) -> Surface:
-    """The filtered normals of a mesh with (F, 3) faces, and, given the (V,) ``planar_v``
-    vertices an earlier stage placed on planar faces, their spread and whether the surface is
-    wrinkled all over (``wrinkled_surface``). A mesh without faces is not wrinkled."""
-    vertices = np.asarray(vertices_vx3, dtype=np.float64)
-    faces = np.asarray(faces_fx3, dtype=np.int64).reshape(-1, 3)
-    original, incidence, normals = filtered_normals(vertices, faces, params, check)
-    spread, wrinkled = None, False
-    if planar_v is not None and len(faces):
-        spread = normal_spread(faces, incidence, normals)
-        wrinkled = wrinkled_surface(spread, planar_v, params)
-    return Surface(original, incidence, normals, spread, wrinkled)
-
-
 def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
                 params: NormalFilter = DEFAULT, fixed_vx3: np.ndarray | None = None,
-                check=None, planar_v: np.ndarray | None = None,
-                surface: Surface | None = None) -> np.ndarray:
+                check=None, planar_v: np.ndarray | None = None) -> np.ndarray:
     """Denoise a triangle mesh, keeping its creases: (V, 3) float64 -> (V, 3) float64.
 
     Args:
@@ -122,8 +94,6 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
             given, vertices on detail stop after ``params.detail_vertex_iterations`` passes
             (``vertex_passes``) and a wrinkled surface is returned as it came
             (``wrinkled_surface``); None: every vertex takes all ``params.vertex_iterations``.
-        surface: ``read_surface`` of the same mesh, ``params`` and ``planar_v``, when the
-            caller has read it already (the pipeline decides on it before filtering).
 
     Returns:
         (V, 3) float64 new vertex positions; the faces index them unchanged.
@@ -132,16 +102,15 @@ def filter_mesh(vertices_vx3: np.ndarray, faces_fx3: np.ndarray,
     faces = np.asarray(faces_fx3, dtype=np.int64).reshape(-1, 3)
     if len(faces) == 0:
         return vertices.copy()
-    if surface is None:
-        surface = read_surface(vertices, faces, params, check, planar_v)
-    if surface.wrinkled:
-        return vertices.copy()
+    original, incidence, normals = filtered_normals(vertices, faces, params, check)
     passes = None
     if planar_v is not None:
-        passes = vertex_passes(faces, surface.incidence, surface.normals, planar_v, params,
-                               surface.spread)
-    return fit_vertices(vertices, faces, surface.incidence, surface.normals, surface.original,
-                        params.vertex_iterations, fixed_vx3, check, passes)
+        spread = normal_spread(faces, incidence, normals)
+        if wrinkled_surface(spread, planar_v, params):
+            return vertices.copy()
+        passes = vertex_passes(faces, incidence, normals, planar_v, params, spread)
+    return fit_vertices(vertices, faces, incidence, normals, original, params.vertex_iterations,
+                        fixed_vx3, check, passes)
 
 
 def filtered_normals(vertices: np.ndarray, faces: np.ndarray, params: NormalFilter = DEFAULT,

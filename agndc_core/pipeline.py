@@ -3,9 +3,7 @@
     grid (VoxelGrid) --pad--> lattice --method--> (vertex offsets, edges) --dual_contour--> mesh
 
 Methods:
-    "agndc"  the AGNDC cascade with the shipped (or a given) checkpoint; a grid whose mesh comes
-             out wrinkled all over (a scan-like organic shape) is remeshed by "undc" instead
-             (``methods.Method.wrinkled_method``);
+    "agndc"  the AGNDC cascade with the shipped (or a given) checkpoint;
     "agndc_fast" the AGNDC cascade distilled for speed (no snake convolutions or attention,
              taught by agndc's own vertices; 1.5x as fast);
     "undc"   the single-scale plain-convolution baseline checkpoint (paper Table 4, first row);
@@ -55,7 +53,6 @@ from .methods import (  # noqa: F401  (the registry's lists, re-exported: one de
     CHECKPOINT_NAMES,
     MESH_ONLY_METHODS,
     METHODS,
-    WRINKLED_METHODS,
 )
 from .options import RemeshOptions
 from .progress import (  # noqa: F401  (subrange: part of this module's API)
@@ -174,9 +171,7 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
     voxel-face patch that is not a terrace gets one depth); for dual methods on a voxelised
     mesh the source's bounding planes; dual contouring; for a network's mesh the normal filter
     (``normalfilter.py``: bilateral filtering of the face normals, creases kept) and the fold
-    check; low poly when asked (``decimate.py``). A grid whose mesh by a method with a
-    ``wrinkled_method`` (AGNDC) comes out wrinkled all over is remeshed by that method instead
-    (``_remesh_instead``), once the filter has read the surface.
+    check; low poly when asked (``decimate.py``).
     """
     opts = RemeshOptions.of(options, **changes)
     method, checkpoint, threads, device = opts.method, opts.checkpoint, opts.threads, opts.device
@@ -245,13 +240,8 @@ def remesh(grid: VoxelGrid, options: RemeshOptions | None = None, *, progress=No
             "dual contouring", dual_contour, vertex, edge, lattice,
             min_component_faces=min_component_faces, face_quads=True)
         if filtered:
-            surface = stages.run("normal filter", read_contoured_surface, vertices, faces,
-                                 vertex, pinned, check=stages.check)
-            if surface.wrinkled and method in WRINKLED_METHODS:
-                return _remesh_instead(WRINKLED_METHODS[method], grid, opts, stages, cancel,
-                                       reframe, method)
             vertices = stages.run("normal filter", filter_contoured_mesh, vertices, faces,
-                                  vertex, pinned, check=stages.check, surface=surface)
+                                  vertex, pinned, check=stages.check)
         if "fold check" in planned:  # a network's vertices: no component turned inside out
             vertices = stages.run("fold check", unfold_components, vertices, faces, lattice,
                                   edge, min_component_faces, check=stages.check)
@@ -293,50 +283,18 @@ def unfold_components(vertices, faces, lattice, edge, min_component_faces: int =
     return restore_folded_components(vertices, faces, reference)[0]
 
 
-def read_contoured_surface(vertices, faces, vertex, pinned, check=None):
-    """``normalfilter.read_surface`` of a contoured mesh in lattice units, with the vertices
-    the flat-patch and bounds stages placed (``pinned``: (X, Y, Z, 3) bool over the cells'
-    ``vertex`` offsets) as its planar ones: the filtered normals, and whether the surface is
-    wrinkled all over."""
-    from .flatpatches import pinned_coordinates
-    from .normalfilter import read_surface
-
-    planar_v = pinned_coordinates(vertices, vertex, pinned).any(axis=1)  # (V,)
-    return read_surface(vertices, faces, check=check, planar_v=planar_v)
-
-
-def filter_contoured_mesh(vertices, faces, vertex, pinned, check=None, surface=None):
+def filter_contoured_mesh(vertices, faces, vertex, pinned, check=None):
     """``normalfilter.filter_mesh`` of a contoured mesh, in lattice units (where the network's
     noise is the same along every axis), keeping the coordinates the flat-patch and bounds
     stages placed (``pinned``: (X, Y, Z, 3) bool over the cells' ``vertex`` offsets). The
     vertices they placed are on planar faces, where the filter's full vertex update runs even
-    if the faces around bend like detail (``normalfilter.vertex_passes``). ``surface``: its
-    ``read_contoured_surface``, when read already."""
+    if the faces around bend like detail (``normalfilter.vertex_passes``)."""
     from .flatpatches import pinned_coordinates
     from .normalfilter import filter_mesh
 
     fixed = pinned_coordinates(vertices, vertex, pinned)  # (V, 3)
     return filter_mesh(vertices, faces, fixed_vx3=fixed, check=check,
-                       planar_v=fixed.any(axis=1), surface=surface)
-
-
-def _remesh_instead(method: str, grid: VoxelGrid, opts: RemeshOptions, stages: Stages, cancel,
-                    reframe: bool, asked: str) -> RemeshResult:
-    """``remesh`` of ``grid`` by ``method`` with the shipped weights (the rest of ``opts`` as
-    they are), for a grid whose mesh by ``asked`` came out wrinkled all over: its progress
-    fills what is left of the bar, its stages are timed as "<stage> (<method>)" after those
-    already run, and the result keeps the name of the method asked for."""
-    label = BY_NAME[method].label
-    report = subrange(stages.report, stages.reported, 1.0)
-    progress = (None if stages.progress is None else
-                lambda fraction, message: report(fraction, f"{message} ({label}, wrinkled "
-                                                 "surface)"))
-    result = remesh(grid, opts, progress=progress, cancel=cancel, reframe=reframe,
-                    method=method, checkpoint=None)
-    timings = {**stages.timings,
-               **{f"{name} ({method})": seconds for name, seconds in result.timings.items()}}
-    return RemeshResult(result.vertices, result.faces, asked, stages.seconds, timings, grid,
-                        result.face_quads)
+                       planar_v=fixed.any(axis=1))
 
 
 def _snap_to_source_bounds(grid: VoxelGrid, lattice: np.ndarray, vertex: np.ndarray,

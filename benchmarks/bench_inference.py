@@ -2,9 +2,7 @@
 
 For each input, in a fresh subprocess (so peak RSS is per input): ``pipeline.remesh`` of the same
 ``VoxelGrid`` with marching cubes, surface nets, the shipped AGNDC (numpy runtime: network, flat
-patches, dual contouring, normal filter; a grid whose mesh comes out wrinkled all over, like the
-``brain`` mask, is remeshed by UNDC as well, ``methods.WRINKLED_METHODS``) and its distilled
-version (``agndc_fast``), the best of
+patches, dual contouring, normal filter) and its distilled version (``agndc_fast``), the best of
 ``--repeat`` runs each, with the ratio of AGNDC to MC and to surface nets, the pipeline's stage
 times, the network's time per scale and per module (GDFEM's convolutions, LWSA, DSConv, FDM,
 DFFM, CRPM, band set-up), the numpy runtime's convolution throughput, and, where torch is
@@ -209,11 +207,6 @@ def print_row(r: dict) -> None:
     print(f"  the distilled cascade (agndc_fast) {fast['seconds']:.2f} s = "
           f"{fast['seconds'] / mc:.0f}x MC, {a['seconds'] / fast['seconds']:.2f}x faster")
     print("  stages: " + ", ".join(f"{k} {v:.2f}" for k, v in a["stages"].items()))
-    instead = {k: v for k, v in a["stages"].items() if k.endswith(")")}  # "<stage> (<method>)"
-    if instead:  # the grid's AGNDC mesh came out wrinkled all over: remeshed again by UNDC
-        method = next(iter(instead)).rsplit("(", 1)[1][:-1]
-        print(f"  wrinkled all over: remeshed by {method} as well, {sum(instead.values()):.2f} s "
-              f"of the {a['seconds']:.2f} s ({sum(instead.values()) / a['seconds']:.0%})")
     print("  network: " + ", ".join(f"{k} {v:.2f}" for k, v in sorted(
         a["modules"].items(), key=lambda kv: -kv[1])))
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from stage_eval import asked_method_everywhere, eval_parser, run_eval_cached
+from stage_eval import eval_parser, run_eval_cached
 
 
 def logged(filter_mesh, log: Path, params):
@@ -29,8 +29,7 @@ def logged(filter_mesh, log: Path, params):
     to ``log``."""
     from agndc_core import normalfilter as nf
 
-    def run(vertices, faces, _params=None, fixed_vx3=None, check=None, planar_v=None,
-            surface=None):
+    def run(vertices, faces, _params=None, fixed_vx3=None, check=None, planar_v=None):
         faces_ = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         vertices_ = np.asarray(vertices, dtype=np.float64)
         _, incidence, normals = nf.filtered_normals(vertices_, faces_, params, check)
@@ -64,18 +63,17 @@ def main() -> None:
     plain = normalfilter.filter_mesh
     if args.where == "none":
         def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
-                        planar_v=None, surface=None):
+                        planar_v=None):
             return np.asarray(vertices, dtype=np.float64).copy()
     else:
         def replacement(vertices, faces, _params=None, fixed_vx3=None, check=None,
-                        planar_v=None, surface=None):
+                        planar_v=None):
             return plain(vertices, faces, params, fixed_vx3, check, planar_v)
     if args.log is not None:
         normalfilter.filter_mesh = logged(replacement, args.log, params)
     else:
         normalfilter.filter_mesh = replacement
     print(params, args.where)
-    asked_method_everywhere()  # the filter on AGNDC's own vertices, wrinkled or not
     run_eval_cached(args)
 
 

@@ -33,15 +33,6 @@ def eval_parser(doc: str, data_help: str = "folder of meshes (agndc val-data)",
     return parser
 
 
-def asked_method_everywhere() -> None:
-    """Remesh every grid with the method asked for: no grid whose mesh comes out wrinkled all
-    over handed to another method (``methods.WRINKLED_METHODS``). For the studies of the stages
-    that follow AGNDC's own vertices (the normal filter's)."""
-    from agndc_core import methods
-
-    methods.WRINKLED_METHODS.clear()  # the pipeline reads this same dict
-
-
 def run_eval(args: argparse.Namespace) -> None:
     """``agndc eval`` of the parsed arguments (AGNDC unless the study takes --methods)."""
     from agndc_core.cli import main as agndc

@@ -11,12 +11,7 @@ report's picture). The validation family, and the dev meshes' picture in ``docs/
     .venv/bin/python research/validation_figure.py ../shared/data/dev --report-shapes \\
         -o docs/results_shapes.png
 
-``--methods mc,agndc,agndc_fast`` draws other methods' columns (their menu names as titles);
-``--own`` draws AGNDC's own mesh where the pipeline would hand the grid to another method (a
-surface wrinkled all over, ``methods.WRINKLED_METHODS``), titled "AGNDC, own":
-
-    .venv/bin/python research/validation_figure.py runs/val2 val_2000017 val_2000031 \\
-        --methods mc,undc,agndc --own -o docs/images/wrinkled_surfaces.png
+``--methods mc,agndc,agndc_fast`` draws other methods' columns (their menu names as titles).
 """
 
 from __future__ import annotations
@@ -44,8 +39,6 @@ def main() -> None:
     parser.add_argument("--res", type=int, default=64)
     parser.add_argument("--methods", help="comma-separated methods instead of MC, surface nets, "
                         "UNDC and AGNDC")
-    parser.add_argument("--own", action="store_true", help="AGNDC's own mesh of a grid the "
-                        "pipeline hands to another method (a surface wrinkled all over)")
     args = parser.parse_args()
     names = list(FIGURE_SHAPES) if args.report_shapes else args.names
     if not names:
@@ -55,12 +48,6 @@ def main() -> None:
         from agndc_core.methods import title
 
         columns = tuple((title(m), m, {}) for m in args.methods.split(",")) + FIGURE_COLUMNS[-1:]
-    if args.own:
-        from stage_eval import asked_method_everywhere
-
-        asked_method_everywhere()
-        columns = tuple((f"{name}, own" if method == "agndc" else name, method, options)
-                        for name, method, options in columns)
     if not render_figure(find_meshes(args.folder), names, args.out, resolution=args.res,
                          columns=columns, colours=FIGURE_COLOURS):
         raise SystemExit(f"none of {names} in {args.folder}")

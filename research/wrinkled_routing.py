@@ -1,39 +1,53 @@
-"""Which method remeshes a grid whose AGNDC mesh comes out wrinkled all over.
+"""A grid whose AGNDC mesh comes out wrinkled all over, remeshed by another method instead.
 
 ``normalfilter.wrinkled_surface`` picks the meshes the normal filter leaves alone: few vertices
-on planar patches and a middle share on detail, the scan-like organic shapes whose wrinkles are
-finer than the voxels. On them the shipped AGNDC smooths away more of the wrinkles than UNDC,
-which is closer to the surface on every such validation shape, so the pipeline remeshes such
-a grid with the method ``methods.WRINKLED_METHODS`` names. This study scores ``agndc eval`` of
-AGNDC with that choice replaced (``--instead none``: AGNDC's own mesh, as before the choice):
+on planar patches and a middle share on detail (the scan-like organic shapes whose wrinkles are
+finer than the voxels). On the validation family's wrinkled figurines UNDC is closer than
+AGNDC. This study scores ``agndc eval`` of AGNDC with every grid the rule picks remeshed by
+``--instead`` (the whole pipeline of that method, its shipped weights), the other grids left to
+AGNDC:
 
-    .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead none --res 64
-    .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead agndc_fast --shifts 3
+    .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead undc --res 64
+    .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead undc --shifts 3 \\
+        --checkpoint undc=runs/undc_wrinkled16/final.safetensors
 
-``--methods agndc_fast`` scores the distilled network with the choice applied to it as well.
-docs/experiments/wrinkled-surfaces.md has the numbers.
+The rows are AGNDC's (``agndc``); docs/experiments/wrinkled-surfaces.md has the numbers.
 """
 
 from __future__ import annotations
 
-from stage_eval import asked_method_everywhere, eval_parser, run_eval
+from stage_eval import eval_parser, run_eval
 
 
 def main() -> None:
-    parser = eval_parser(__doc__)
-    parser.add_argument("--instead", default="undc",
-                        choices=("none", "undc", "agndc_fast", "surfacenets"),
-                        help="the method that remeshes a wrinkled surface (none: the one asked)")
+    parser = eval_parser(__doc__, methods=False)
+    parser.add_argument("--instead", default="undc", choices=("undc", "agndc_fast"),
+                        help="the method that remeshes a grid whose AGNDC mesh is wrinkled")
+    parser.add_argument("--checkpoint", default=None, help="its weights (default: shipped)")
     args = parser.parse_args()
 
-    from agndc_core import methods
+    from agndc_core import normalfilter, pipeline
 
-    asked = args.methods.split(",")
-    asked_method_everywhere()
-    if args.instead != "none":
-        methods.WRINKLED_METHODS.update({name: args.instead for name in asked
-                                         if name != args.instead})
-    print("wrinkled surfaces:", methods.WRINKLED_METHODS or "the method asked")
+    plain_remesh, plain_rule = pipeline.remesh, normalfilter.wrinkled_surface
+    picked = []
+
+    def rule(*rule_args, **rule_options):  # the filter's reading, remembered
+        wrinkled = plain_rule(*rule_args, **rule_options)
+        picked.append(wrinkled)
+        return wrinkled
+
+    def remesh(grid, options=None, **changes):
+        picked.clear()
+        result = plain_remesh(grid, options, **changes)
+        if result.method != "agndc" or not any(picked):
+            return result
+        changes.update(method=args.instead, checkpoint=args.checkpoint, progress=None)
+        instead = plain_remesh(grid, options, **changes)
+        instead.method, instead.seconds = "agndc", result.seconds + instead.seconds
+        return instead
+
+    normalfilter.wrinkled_surface = rule
+    pipeline.remesh = remesh  # remesh_mesh looks it up on every call
     run_eval(args)
 
 

@@ -16,7 +16,6 @@ from agndc_core.normalfilter import (
     filtered_normals,
     keep_orientation,
     normal_spread,
-    read_surface,
     wrinkled_surface,
 )
 from agndc_core.pipeline import remesh, taubin_smooth
@@ -247,58 +246,6 @@ def test_remesh_filters_a_networks_mesh_only():
     assert volume[1] > 0 and abs(volume[1] / volume[0] - 1) < 0.02
     nets = remesh(grid, method="surfacenets", normal_filter=True)
     assert "normal filter" not in nets.timings
-    assert not any("(undc)" in name for name in filtered.timings)  # a smooth ball: AGNDC's
-
-
-def _wrinkled_grid():
-    """A 28^3 ellipsoid with wrinkles about 4 voxels long and up to a voxel high: AGNDC's mesh
-    of it has 1 % of its vertices on planar patches and ~60 % on detail (wrinkled all over)."""
-    x, y, z = np.indices((28, 28, 28)) - 13.5
-    bumps = 1 + 0.1 * np.sin(1.5 * x) * np.sin(1.5 * y + 0.5) * np.sin(1.5 * z + 1.0)
-    return VoxelGrid(np.sqrt(x ** 2 + y ** 2 + (1.3 * z) ** 2) < 11 * bumps)
-
-
-def test_a_wrinkled_grid_is_remeshed_by_the_method_the_registry_names(monkeypatch):
-    """AGNDC hands a grid whose mesh comes out wrinkled all over to UNDC: the result is UNDC's
-    mesh, under AGNDC's name, with both runs' stages timed and one progress bar to 1."""
-    from agndc_core import methods
-
-    assert methods.WRINKLED_METHODS == {"agndc": "undc"}
-    grid = _wrinkled_grid()
-    reports = []
-    routed = remesh(grid, method="agndc", threads=1,
-                    progress=lambda fraction, message: reports.append((fraction, message)))
-    undc = remesh(grid, method="undc", threads=1)
-    assert routed.method == "agndc"
-    np.testing.assert_array_equal(routed.faces, undc.faces)
-    np.testing.assert_array_equal(routed.vertices, undc.vertices)
-    assert {"predict", "normal filter", "predict (undc)", "fold check (undc)"} <= set(
-        routed.timings)
-    fractions = [fraction for fraction, _ in reports]
-    assert fractions == sorted(fractions) and fractions[-1] == 1.0
-    assert reports[-1][1] == "done (UNDC, wrinkled surface)"
-    # without the registry's choice the grid keeps AGNDC's own, unfiltered mesh
-    monkeypatch.delitem(methods.WRINKLED_METHODS, "agndc")
-    own = remesh(grid, method="agndc", threads=1)
-    raw = remesh(grid, method="agndc", threads=1, normal_filter=False)
-    assert not any("(undc)" in name for name in own.timings)
-    np.testing.assert_array_equal(own.vertices, raw.vertices)
-    assert not np.array_equal(own.vertices, undc.vertices)
-
-
-def test_a_surface_read_once_filters_as_one_read_inside():
-    """``filter_mesh`` given the ``read_surface`` of the same mesh returns what it computes
-    alone; a mesh without faces reads as not wrinkled."""
-    _, vertices, faces = _noisy_box()
-    planar = np.arange(len(vertices)) % 3 == 0
-    surface = read_surface(vertices, faces, planar_v=planar)
-    assert not surface.wrinkled and surface.spread.shape == (len(vertices),)
-    np.testing.assert_array_equal(
-        filter_mesh(vertices, faces, planar_v=planar, surface=surface),
-        filter_mesh(vertices, faces, planar_v=planar))
-    empty = read_surface(vertices, np.zeros((0, 3), dtype=np.int64),
-                         planar_v=np.zeros(len(vertices), dtype=bool))
-    assert not empty.wrinkled and empty.spread is None
 
 
 def test_the_filter_checks_before_every_pass():
