@@ -9,7 +9,7 @@ AGNDC:
 
     .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead undc --res 64
     .venv/bin/python research/wrinkled_routing.py DATA -o OUT --instead undc --shifts 3 \\
-        --checkpoint undc=runs/undc_wrinkled16/final.safetensors
+        --checkpoint runs/undc_wrinkled16/final.safetensors
 
 The rows are AGNDC's (``agndc``); docs/experiments/wrinkled-surfaces.md has the numbers.
 """
