@@ -21,8 +21,9 @@
 # finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
 # at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
 # the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
-# continued 3,000 steps at half its learning rate again. A stage is kept short (80-120 min
-# where a step takes ~6 s).
+# continued 3,000 steps at half its learning rate again. Stage 20: the shipped UNDC (stage 18)
+# continued 3,000 steps on the same data at half its learning rate. A stage is kept short
+# (80-120 min where a step takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
 # shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
@@ -33,10 +34,7 @@
 # their own recipe with a new seed (it wanders about the shipped weights). Stage 11: the same
 # with 900 new training shapes (DATA_fresh, seeds from 40,000) in place of DATA. Stage 12: the
 # shipped weights on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with
-# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md). Stage 18:
-# the shipped UNDC continued 3,000 steps on DATA and the wrinkled shapes (DATA_wrinkled) at
-# 5e-4, EMA 0.995: whether wrinkled training shapes bring UNDC closer on the wrinkled
-# figurines (docs/experiments/wrinkled-surfaces.md).
+# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -49,8 +47,11 @@
 # stage 6: its step 1,000 continued 4,000 steps at half the learning rate (its step 2,000 is the
 # shipped agndc); stage 7: that checkpoint continued 4,000 steps on DATA, the sheets and the
 # wrinkled shapes at a lower learning rate and a slower EMA (docs/experiments/sheet-training.md).
-# Stages 1, 3 and 5 start from weights that a checkout no longer has once others are shipped:
-# they reproduce only where those weights are put back at agndc_core/weights/agndc.safetensors.
+# Stage 18: the UNDC shipped before it (undc_g, sha256 46dd1859...) continued 3,000 steps on
+# DATA and the wrinkled shapes (DATA_wrinkled) at 5e-4, EMA 0.995: the shipped undc
+# (docs/experiments/wrinkled-surfaces.md). Stages 1, 3, 5 and 18 start from weights that a
+# checkout no longer has once others are shipped: they reproduce only where those weights are
+# put back at agndc_core/weights/agndc.safetensors (undc.safetensors for stage 18).
 #
 # undc: the lineage's UNDC twin (the same data, steps, seeds and curriculum as stages 1-2), the
 # baseline of the AGNDC-against-UNDC comparison in docs/training.md.
@@ -98,7 +99,8 @@ case $which in
 current)
     # the stages whose verdict is open, so that a machine with only the repository starts
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
-    # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues) and 15
+    # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15,
+    # 19 (which continues 15) and 20 (the shipped UNDC continued)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -124,10 +126,15 @@ current)
     stage student_agndc16_cont2 --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16_cont/final.safetensors" --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 24 --val-steps 1000,2000,3000
+    # stage 20: the shipped UNDC (stage 18) continued on its data at half its learning rate
+    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
+    stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
+        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14 and 18, rerun from their own starts
+    # 8-12 and 14, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -153,11 +160,6 @@ concluded)
     stage spike_agndc16 --data "$data,$sheets,$spikes" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 18: the shipped UNDC continued on DATA and the wrinkled shapes at half the learning
-    # rate that trained it (docs/experiments/wrinkled-surfaces.md)
-    stage undc_wrinkled16 --undc --model '{"width": 16}' --data "$data,$wrinkled" \
-        --init agndc_core/weights/undc.safetensors --lr 5e-4 --ema 0.995 --seed 23 \
-        --steps 3000 --val-steps 1000,2000,3000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
@@ -181,6 +183,11 @@ history)
     stage wr_agndc16_low --data "$wrinkled" --init "$runs/wr_agndc16/step-002000.safetensors" \
         --model "$shipped_config" --lr 5e-5 --ema 0.999 --seed 8 --steps 6000,0,0 \
         --val-steps 1000,2000,3000,4000,5000,6000
+    # stage 18: the UNDC shipped before it continued on DATA and the wrinkled shapes at half the
+    # learning rate that trained it: the shipped undc (docs/experiments/wrinkled-surfaces.md)
+    stage undc_wrinkled16 --undc --model '{"width": 16}' --data "$data,$wrinkled" \
+        --init agndc_core/weights/undc.safetensors --lr 5e-4 --ema 0.995 --seed 23 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 undc)
     stage bt_undc16_long --undc --model '{"width": 16}' --lr 1e-3 --seed 5 --steps 3000 \
