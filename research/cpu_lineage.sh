@@ -21,7 +21,8 @@
 # finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
 # at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
 # the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
-# continued 3,000 steps at half its learning rate again. Stage 20: the shipped UNDC (stage 18)
+# continued 3,000 steps at half its learning rate again; its step 2,000 is the shipped
+# agndc_fast (agndc_student.safetensors). Stage 20: the shipped UNDC (stage 18)
 # continued 3,000 steps on the same data at half its learning rate. A stage is kept short
 # (80-120 min where a step takes ~6 s).
 #
