@@ -22,9 +22,8 @@
 # at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
 # the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
 # continued 3,000 steps at half its learning rate again; its step 2,000 is the shipped
-# agndc_fast (agndc_student.safetensors). Stage 20: the shipped UNDC (stage 18)
-# continued 3,000 steps on the same data at half its learning rate. A stage is kept short
-# (80-120 min where a step takes ~6 s).
+# agndc_fast (agndc_student.safetensors). A stage is kept short (80-120 min where a step
+# takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
 # shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
@@ -35,7 +34,9 @@
 # their own recipe with a new seed (it wanders about the shipped weights). Stage 11: the same
 # with 900 new training shapes (DATA_fresh, seeds from 40,000) in place of DATA. Stage 12: the
 # shipped weights on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with
-# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md).
+# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md). Stage 20:
+# the shipped UNDC (stage 18) continued 3,000 steps on the same data at half its learning rate
+# (closer on the family, farther on the thin sheets: docs/training.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -100,8 +101,8 @@ case $which in
 current)
     # the stages whose verdict is open, so that a machine with only the repository starts
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
-    # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15,
-    # 19 (which continues 15) and 20 (the shipped UNDC continued)
+    # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
+    # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -127,15 +128,10 @@ current)
     stage student_agndc16_cont2 --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16_cont/final.safetensors" --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 24 --val-steps 1000,2000,3000
-    # stage 20: the shipped UNDC (stage 18) continued on its data at half its learning rate
-    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
-    stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
-        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
-        --steps 3000 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12 and 14, rerun from their own starts
+    # 8-12, 14 and 20, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -161,6 +157,11 @@ concluded)
     stage spike_agndc16 --data "$data,$sheets,$spikes" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 20: the shipped UNDC (stage 18) continued on its data at half its learning rate
+    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
+    stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
+        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
