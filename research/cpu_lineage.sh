@@ -158,7 +158,6 @@ concluded)
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     # stage 20: the shipped UNDC (stage 18) continued on its data at half its learning rate
-    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
         --steps 3000 --val-steps 1000,2000,3000
