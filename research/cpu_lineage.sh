@@ -22,7 +22,10 @@
 # at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
 # the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
 # continued 3,000 steps at half its learning rate again; its step 2,000 is the shipped
-# agndc_fast (agndc_student.safetensors). A stage is kept short (80-120 min where a step
+# agndc_fast (agndc_student.safetensors). Stage 21: the shipped agndc_fast continued 3,000 steps
+# on the true targets (not the teacher's) of DATA, the sheets and the layered parts, at stage
+# 19's learning rate: whether the ground truth takes the student past its teacher on the thin
+# plates it loses (plate_holes, screw). A stage is kept short (80-120 min where a step
 # takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -102,7 +105,8 @@ current)
     # the stages whose verdict is open, so that a machine with only the repository starts
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
-    # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast)
+    # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 21 (the
+    # shipped agndc_fast on the true targets)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -128,6 +132,11 @@ current)
     stage student_agndc16_cont2 --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16_cont/final.safetensors" --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 24 --val-steps 1000,2000,3000
+    # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's, on
+    # DATA, the sheets and the layered parts, at stage 19's learning rate
+    stage student_true16 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 26 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
