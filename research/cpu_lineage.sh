@@ -25,7 +25,8 @@
 # agndc_fast (agndc_student.safetensors). Stage 21: the shipped agndc_fast continued 3,000 steps
 # on the true targets (not the teacher's) of DATA, the sheets and the layered parts, at stage
 # 19's learning rate: whether the ground truth takes the student past its teacher on the thin
-# plates it loses (plate_holes, screw). A stage is kept short (80-120 min where a step
+# plates it loses (plate_holes, screw). Stage 22, its control: the shipped agndc_fast continued
+# 2,000 steps on the teacher's targets at half stage 19's learning rate. A stage is kept short (80-120 min where a step
 # takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -106,7 +107,7 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 21 (the
-    # shipped agndc_fast on the true targets)
+    # shipped agndc_fast on the true targets) and 22 (its control on the teacher's targets)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -137,6 +138,11 @@ current)
     stage student_true16 --data "$data,$sheets,$layered" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 26 --val-steps 1000,2000,3000
+    # stage 22: the shipped agndc_fast continued on the teacher's targets at half stage 19's
+    # learning rate, stage 21's control
+    stage student_agndc16_cont3 --data "${data}_distilled,${sheets}_distilled" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
