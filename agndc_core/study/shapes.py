@@ -1039,6 +1039,144 @@ def layered_shape(seed: int, voxel: float, layer: float) -> tuple[np.ndarray, np
     return _to_arrays(Manifold.cube((1.0, 0.7, 4 * layer), center=True))
 
 
+# ---------------------------------------------------------------- thin struts (training)
+
+#: strut frames (``strut_shape``): the struts' radius in voxels of the sample's grid (from a
+#: rod the grid keeps only in part, under 2 voxels across, to a few voxels) and their sides
+#: (square, hexagonal and octagonal bars, round rods)
+STRUT_RADIUS_VOXELS = (0.7, 3.0)
+STRUT_SIDES = (4, 6, 8, 48)
+
+
+def strut(a, b, radius: float, sides: int) -> Manifold:
+    """A bar of ``sides`` sides, ``radius`` about its axis, from point ``a`` to point ``b``
+    (3,), each end reaching ``radius`` past its point so that bars meeting there join solidly."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    length = float(np.linalg.norm(b - a))
+    axis = (b - a) / length
+    affine = np.zeros((3, 4))
+    affine[:, :3] = _turn_z_to(axis)
+    affine[:, 3] = a - axis * radius
+    return Manifold.cylinder(length + 2 * radius, radius, radius, int(sides)).transform(affine)
+
+
+def _tower(rng, r: float, sides: int, segs: int) -> list[Manifold]:
+    """A pavilion: a base and a roof slab (a disc or a rounded rectangle, 1.5-5 struts thick)
+    on 3-12 columns round their rim, sometimes a ring beam half-way and a spire on the roof."""
+    height = rng.uniform(0.5, 1.0)
+    width = 1.0 - rng.uniform(0.0, 0.2)
+    slab = rng.uniform(1.5, 5.0) * r
+    round_plan = rng.random() < 0.5
+    n = int(rng.integers(3, 13))
+    if round_plan:
+        plan = CrossSection.circle(width / 2, segs)
+        ang = 2 * np.pi * (np.arange(n) + rng.uniform()) / n
+        feet = (width / 2 - 2 * r) * np.column_stack([np.cos(ang), np.sin(ang)])
+    else:
+        depth = width * rng.uniform(0.5, 1.0)
+        plan = _rounded_rect(width, depth, depth * rng.uniform(0.0, 0.2), segs)
+        k = max(2, n // 2)
+        x = np.linspace(-width / 2 + 2 * r, width / 2 - 2 * r, k)
+        feet = np.vstack([np.column_stack([x, np.full(k, y)])
+                          for y in (-depth / 2 + 2 * r, depth / 2 - 2 * r)])
+    parts = [plan.extrude(slab), plan.extrude(slab).translate((0, 0, height - slab))]
+    parts += [strut((*f, slab), (*f, height - slab), r, sides) for f in feet]
+    if rng.random() < 0.4:  # a ring beam joining the columns half-way
+        z = height * rng.uniform(0.3, 0.7)
+        loop = np.vstack([feet, feet[:1]]) if round_plan else feet[[*range(0, len(feet) // 2),
+                                                                   *range(len(feet) - 1,
+                                                                          len(feet) // 2 - 1,
+                                                                          -1), 0]]
+        parts += [strut((*p, z), (*q, z), r, sides) for p, q in zip(loop[:-1], loop[1:])]
+    if rng.random() < 0.4:  # a spire
+        parts.append(strut((0, 0, height - slab), (0, 0, height + rng.uniform(0.1, 0.3)), r,
+                           sides))
+    return parts
+
+
+def _truss(rng, r: float, sides: int) -> list[Manifold]:
+    """A space frame: the nodes of a jittered 2-4 x 1-3 x 1-3 grid, most grid edges a bar, some
+    cells crossed by a diagonal."""
+    counts = np.array([rng.integers(2, 5), rng.integers(1, 4), rng.integers(1, 4)])
+    size = np.array([1.0, *rng.uniform(0.15, 0.8, 2)])
+    axes = [np.linspace(-s / 2, s / 2, c + 1) for s, c in zip(size, counts)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)  # (cx+1, cy+1, cz+1, 3)
+    nodes = nodes + rng.normal(0.0, 0.01, nodes.shape)
+    parts = []
+    for axis in range(3):  # grid edges along each axis
+        a = np.moveaxis(nodes, axis, 0)
+        pairs = np.stack([a[:-1], a[1:]], axis=-2).reshape(-1, 2, 3)
+        keep = rng.random(len(pairs)) < 0.85
+        parts += [strut(p, q, r, sides) for p, q in pairs[keep]]
+    lo = nodes[:-1, :-1, :-1].reshape(-1, 3)
+    hi = nodes[1:, 1:, 1:].reshape(-1, 3)
+    cross = rng.random(len(lo)) < 0.4
+    parts += [strut(p, q, r, sides) for p, q in zip(lo[cross], hi[cross])]
+    return parts
+
+
+def _railing(rng, r: float, sides: int) -> list[Manifold]:
+    """A railing: 2-3 rails 1 long over balusters 3-12 struts apart, thicker posts at the ends,
+    on a sill."""
+    height = rng.uniform(0.2, 0.6)
+    rails = [strut((-0.5, 0, z), (0.5, 0, z), r, sides)
+             for z in np.linspace(height, height * rng.uniform(0.1, 0.4), int(rng.integers(2, 4)))]
+    spacing = rng.uniform(3.0, 12.0) * r
+    xs = np.arange(-0.5 + spacing / 2, 0.5, spacing)
+    balusters = [strut((x, 0, 0), (x, 0, height), r, sides) for x in xs]
+    post = r * rng.uniform(1.5, 2.5)
+    posts = [strut((x, 0, -post), (x, 0, height + post), post, sides) for x in (-0.5, 0.5)]
+    sill = Manifold.cube((1.0 + 2 * post, 4 * post, 2 * post), center=True).translate(
+        (0, 0, -post))
+    return [*rails, *balusters, *posts, sill]
+
+
+def _rings(rng, r: float, segs: int) -> list[Manifold]:
+    """Wire rings: 1-4 tori of tube radius ``r`` and major radius 0.12-0.5, turned freely,
+    linked or apart, as in a chain, a handle or a jump ring."""
+    parts = []
+    for k in range(int(rng.integers(1, 5))):
+        major = rng.uniform(0.12, 0.5)
+        ring = CrossSection.circle(r, max(8, segs // 3)).translate((major, 0)).revolve(segs)
+        affine = np.zeros((3, 4))
+        affine[:, :3] = _random_rotation(rng, aligned=rng.random() < 0.5)
+        affine[:, 3] = rng.uniform(-0.3, 0.3, 3) * (k > 0)
+        parts.append(ring.transform(affine))
+    return parts
+
+
+def strut_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """A frame of thin struts ``STRUT_RADIUS_VOXELS`` in radius (``voxel`` a fraction of the
+    longest side, which is 1 after normalisation): a pavilion (two slabs on columns), a space
+    frame, a railing or wire rings; square to round bars (``STRUT_SIDES``). Rods a few voxels
+    across are where a grid keeps a jagged staircase of a round section, which the training
+    shapes (``generate_shape``) never show: columns of printed miniatures, lattices, wires,
+    vessels in a segmentation mask. Placement: as ``sheet_shape``. Deterministic in (seed,
+    voxel); a single rod if every draw fails."""
+    aligned = is_axis_aligned(seed)
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, attempt, 13))
+        r = rng.uniform(*STRUT_RADIUS_VOXELS) * voxel
+        sides = int(rng.choice(STRUT_SIDES))
+        segs = int(rng.integers(SEGMENTS[0], SEGMENTS[1] + 1))
+        kind = int(rng.integers(4))
+        if kind == 0:
+            parts = _tower(rng, r, sides, segs)
+        elif kind == 1:
+            parts = _truss(rng, r, sides)
+        elif kind == 2:
+            parts = _railing(rng, r, sides)
+        else:
+            parts = _rings(rng, r, segs)
+        m = Manifold.batch_boolean(parts, OpType.Add)
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        placed = _place_flat_part(rng, m, aligned)
+        if placed is not None:
+            return placed
+    return _to_arrays(strut((-0.5, 0, 0), (0.5, 0, 0), 2 * voxel, 48))
+
+
 def _section_box(section: CrossSection) -> tuple[np.ndarray, np.ndarray]:
     """(2,) min and max corners of a cross-section."""
     box = section.bounds()

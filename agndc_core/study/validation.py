@@ -26,6 +26,11 @@ that bound it lie in the shape's outermost layers of cells, where the flat-patch
 their depth from the network (``flatpatches.py``; along a plate's longest side, where the
 voxeliser puts them mid-layer, they go there).
 
+**Thin struts** are a third family (``validation_strut``, ``agndc val-data --struts``, seeds
+from ``STRUT_SEED0``): stools, lattice cubes, masts, coil springs and plates of pins, their bars
+0.8-3 voxels in radius at 64^3 (columns of printed miniatures, lattices, wires), builders apart
+from the training generator's strut frames (``shapes.strut_shape``).
+
 ``validation_shape(seed)`` returns the class, the builder's name and a normalised closed mesh
 (bounding-box centre at the origin, longest side 1), deterministic in the seed. ``write_family``
 writes OBJ files and a ``MANIFEST.csv`` whose ``kind`` column ``agndc eval`` reports by.
@@ -52,6 +57,7 @@ from .shapes import (
     _to_arrays,
     field_surface,
     small_turn,
+    strut,
 )
 
 #: a stream of its own: the same seed never draws what ``shapes.generate_shape`` draws
@@ -74,6 +80,11 @@ FIELD_SAMPLES = 96
 SHEET_SEED0 = 3_000_000
 SHEET_VOXELS = (1.5, 3.0)
 SHEET_ALIGNED_SHARE = 0.6
+#: thin struts: first seed, bar radius in voxels at 64^3 (a rod under 2 voxels across keeps
+#: only part of its section on the grid), share left on the grid axes
+STRUT_SEED0 = 4_000_000
+STRUT_VOXELS = (0.8, 3.0)
+STRUT_ALIGNED_SHARE = 0.5
 #: share of the figurines with a scanned look, and their wrinkles' wavelengths (voxels at 64^3)
 WRINKLED_SHARE = 0.5
 WRINKLE_VOXELS = (3.0, 10.0)
@@ -375,6 +386,112 @@ def _sheet(rng, segs) -> Manifold:
     return Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
 
 
+# ---------------------------------------------------------------- thin struts
+
+
+def _bar_sides(rng) -> int:
+    """Square, hexagonal or round bars."""
+    return int(rng.choice((4, 6, 48)))
+
+
+def _stool(rng, segs) -> Manifold:
+    """A stool or side table: a seat (a disc or a square, 2-6 voxels thick) on 3-4 splayed
+    legs ``STRUT_VOXELS`` in radius, joined by a ring of rungs."""
+    r, sides = _voxels(rng, *STRUT_VOXELS), _bar_sides(rng)
+    height, width = rng.uniform(0.5, 1.0), rng.uniform(0.5, 1.0)
+    seat_t = _voxels(rng, 2.0, 6.0)
+    n = int(rng.integers(3, 5))
+    if rng.random() < 0.5:
+        seat = CrossSection.circle(width / 2, segs).extrude(seat_t)
+    else:
+        seat = Manifold.cube((width, width, seat_t), center=True).translate((0, 0, seat_t / 2))
+    ang = 2 * np.pi * (np.arange(n) + 0.5) / n
+    unit = np.column_stack([np.cos(ang), np.sin(ang)])
+    top = unit * (width / 2 - 3 * r)
+    foot = unit * (width / 2 - 3 * r + rng.uniform(0.0, 0.12))
+    legs = [strut((*f, -height), (*t, seat_t / 2), r, sides) for f, t in zip(foot, top)]
+    z = -height * rng.uniform(0.4, 0.7)
+    ring = top + (foot - top) * (-z / height)
+    rungs = [strut((*p, z), (*q, z), r * 0.8, sides) for p, q in zip(ring, np.roll(ring, -1, 0))]
+    return Manifold.batch_boolean([seat, *legs, *rungs], OpType.Add)
+
+
+def _lattice_cube(rng, segs) -> Manifold:
+    """A printed lattice block: every edge of a 2-4 cells a side cubic grid a bar (an open
+    cage), sometimes each cell's face diagonals too."""
+    r, sides = _voxels(rng, *STRUT_VOXELS), _bar_sides(rng)
+    cells = np.array([rng.integers(2, 5), rng.integers(1, 5), rng.integers(1, 5)])
+    size = cells / cells.max()
+    axes = [np.linspace(-s / 2, s / 2, c + 1) for s, c in zip(size, cells)]
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    bars = []
+    for axis in range(3):  # the grid's edges along each axis
+        a = np.moveaxis(nodes, axis, 0)
+        bars += [strut(p, q, r, sides) for p, q in np.stack([a[:-1], a[1:]], -2).reshape(-1, 2, 3)]
+    if rng.random() < 0.4:  # x-bracing in the faces normal to z
+        a = nodes
+        bars += [strut(p, q, r * 0.8, sides) for p, q in zip(
+            a[:-1, :-1, :].reshape(-1, 3), a[1:, 1:, :].reshape(-1, 3))]
+    return Manifold.batch_boolean(bars, OpType.Add)
+
+
+def _mast(rng, segs) -> Manifold:
+    """An antenna or signpost: a mast on a round foot, 2-6 crossbars, sometimes stays from
+    their ends to the foot."""
+    r, sides = _voxels(rng, *STRUT_VOXELS), _bar_sides(rng)
+    height = 1.0
+    foot_r, foot_t = rng.uniform(0.1, 0.25), _voxels(rng, 2.0, 5.0)
+    parts = [Manifold.cylinder(foot_t, foot_r, foot_r * rng.uniform(0.6, 1.0), segs),
+             strut((0, 0, foot_t), (0, 0, height), r * rng.uniform(1.0, 1.6), sides)]
+    for z in np.sort(rng.uniform(0.35, 0.95, int(rng.integers(2, 7)))):
+        half = rng.uniform(0.08, 0.35)
+        turn = rng.uniform(0, np.pi)
+        d = half * np.array([np.cos(turn), np.sin(turn), 0.0])
+        parts.append(strut(np.array([0, 0, z]) - d, np.array([0, 0, z]) + d, r, sides))
+        if rng.random() < 0.3:
+            parts.append(strut(np.array([0, 0, z]) + d, (0, 0, foot_t), r * 0.7, sides))
+    return Manifold.batch_boolean(parts, OpType.Add)
+
+
+def _spring(rng, segs) -> Manifold:
+    """A coil spring or a wire helix: 2-8 turns of a round wire, closed ends sometimes ground
+    flat."""
+    r = _voxels(rng, *STRUT_VOXELS)
+    turns = rng.uniform(2.0, 8.0)
+    coil = rng.uniform(0.12, 0.45)
+    pitch = max(1.0 / turns, 4.0 * r)
+    t = np.linspace(0.0, turns * 2 * np.pi, int(turns * 24) + 1)
+    path = np.column_stack([coil * np.cos(t), coil * np.sin(t), pitch * t / (2 * np.pi)])
+    ball = Manifold.sphere(r, 16)
+    pieces = [Manifold.batch_hull([ball.translate(tuple(p)), ball.translate(tuple(q))])
+              for p, q in zip(path[:-1], path[1:])]  # a few hundred short hulls
+    m = Manifold.batch_boolean(pieces, OpType.Add)
+    if rng.random() < 0.5:  # ground ends
+        lo, hi = _bounds(m)
+        m = m ^ Manifold.cube(tuple(hi - lo - np.array([0, 0, 2 * r])), center=True).translate(
+            tuple((lo + hi) / 2))
+    return m
+
+
+def _pin_plate(rng, segs) -> Manifold:
+    """A plate (3-8 voxels thick) with 3-20 thin pins standing on it: a connector, a nail
+    board, a hairbrush, the columns of a printed miniature's porch."""
+    r, sides = _voxels(rng, *STRUT_VOXELS), _bar_sides(rng)
+    w, h = 1.0, rng.uniform(0.3, 1.0)
+    t = _voxels(rng, 3.0, 8.0)
+    plate = Manifold.cube((w, h, t), center=True)
+    n = int(rng.integers(3, 21))
+    xy = rng.uniform(-1, 1, (n, 2)) * (np.array([w, h]) / 2 - 3 * r)
+    length = rng.uniform(0.1, 0.6)
+    pins = [strut((x, y, 0), (x, y, t / 2 + length * rng.uniform(0.6, 1.0)), r, sides)
+            for x, y in xy]
+    return Manifold.batch_boolean([plate, *pins], OpType.Add)
+
+
+STRUT_BUILDERS = {"stool": (_stool, 0.25), "lattice_cube": (_lattice_cube, 0.2),
+                  "mast": (_mast, 0.2), "spring": (_spring, 0.15), "pin_plate": (_pin_plate, 0.2)}
+
+
 BUILDERS = {
     "cad": {"tilted_part": (_tilted_part, 0.40), "flange": (_flange, 0.2),
             "gear": (_gear, 0.2), "bracket": (_bracket, 0.2)},
@@ -456,8 +573,25 @@ def validation_sheet(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     raise RuntimeError(f"sheet seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
 
 
-#: the shape functions of ``write_family``'s families
-FAMILIES = {"main": validation_shape, "sheets": validation_sheet}
+def validation_strut(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
+    """``validation_shape`` of the thin-strut family: ("print", builder name, vertices,
+    faces), deterministic in the seed (its own stream)."""
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, SEED_STREAM, attempt, 2))
+        name, build = _draw(rng, STRUT_BUILDERS)
+        m = build(rng, int(rng.integers(24, 65)))
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        m = _place(m, rng, "print", aligned_share=STRUT_ALIGNED_SHARE)
+        vertices, faces = _to_arrays(_drop_slivers(m))
+        if _edge_manifold(faces):
+            return "print", name, vertices, faces
+    raise RuntimeError(f"strut seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+
+
+#: the shape functions of ``write_family``'s families and their first seeds
+FAMILIES = {"main": validation_shape, "sheets": validation_sheet, "struts": validation_strut}
+FIRST_SEEDS = {"main": SEED0, "sheets": SHEET_SEED0, "struts": STRUT_SEED0}
 
 
 def save_shape(out, file: str, kind: str, shape: str, seed: int, vertices, faces) -> dict:
@@ -485,13 +619,13 @@ def _write_one(args) -> dict:
 
 def write_family(out, n: int, seed0: int | None = None, workers: int = 2,
                  family: str = "main") -> list[dict]:
-    """Write seeds ``seed0 .. seed0 + n - 1`` (default: ``SEED0``, or ``SHEET_SEED0`` for the
-    "sheets" family) of ``family`` ("main" or "sheets") as OBJ files and ``MANIFEST.csv``
-    (file, kind, shape, seed, faces) into ``out``; returns the manifest rows."""
+    """Write seeds ``seed0 .. seed0 + n - 1`` (default: the family's ``FIRST_SEEDS``) of
+    ``family`` ("main", "sheets" or "struts") as OBJ files and ``MANIFEST.csv`` (file, kind,
+    shape, seed, faces) into ``out``; returns the manifest rows."""
     if family not in FAMILIES:
         raise ValueError(f"unknown validation family {family!r}; choose one of {list(FAMILIES)}")
     if seed0 is None:
-        seed0 = SHEET_SEED0 if family == "sheets" else SEED0
+        seed0 = FIRST_SEEDS[family]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(seed, str(out), family) for seed in range(seed0, seed0 + n)]

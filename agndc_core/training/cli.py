@@ -30,6 +30,10 @@ def add_train_parser(sub) -> None:
     p.add_argument("--layered", type=float, default=0.0, help="share of the samples (sheets "
                    "and spiky shapes aside) that are layered parts instead: caps, lids and "
                    "stepped plates of 3-12 layers 0.8-1.4 voxels thick (default 0)")
+    p.add_argument("--struts", type=float, default=0.0, help="share of the samples (sheets, "
+                   "spiky and layered shapes aside) that are frames of thin struts instead, "
+                   "0.7-3 voxels in radius: pavilions on columns, space frames, railings, wire "
+                   "rings (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -38,9 +42,13 @@ def add_train_parser(sub) -> None:
     p.add_argument("-o", "--out", type=Path, required=True)
     p.add_argument("-n", "--count", type=int, default=48)
     p.add_argument("--seed0", type=int, default=None, help="first seed (default 2,000,000; "
-                   "3,000,000 with --sheets)")
-    p.add_argument("--sheets", action="store_true", help="the thin-sheet family instead: flat "
-                   "plates 1.5-3 voxels thick at 64^3 with holes, slots and pockets")
+                   "3,000,000 with --sheets, 4,000,000 with --struts)")
+    family = p.add_mutually_exclusive_group()
+    family.add_argument("--sheets", action="store_true", help="the thin-sheet family instead: "
+                        "flat plates 1.5-3 voxels thick at 64^3 with holes, slots and pockets")
+    family.add_argument("--struts", action="store_true", help="the thin-strut family instead: "
+                        "stools, lattice cubes, masts and springs of bars 0.8-3 voxels in "
+                        "radius at 64^3")
     p.add_argument("--workers", type=int, default=2)
     p.set_defaults(func=_cmd_val_data)
 
@@ -123,7 +131,7 @@ def _cmd_data(args) -> int:
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds, wrinkled=args.wrinkled,
                           sheets=args.sheets, tilted=args.tilted, spikes=args.spikes,
-                          layered=args.layered)
+                          layered=args.layered, struts=args.struts)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 
@@ -134,7 +142,7 @@ def _cmd_val_data(args) -> int:
     from ..study.validation import write_family
 
     rows = write_family(args.out, args.count, args.seed0, args.workers,
-                        family="sheets" if args.sheets else "main")
+                        family="sheets" if args.sheets else "struts" if args.struts else "main")
     kinds = Counter(r["kind"] for r in rows)
     print(f"{len(rows)} meshes in {args.out} ({', '.join(f'{n} {k}' for k, n in kinds.items())})")
     return 0

@@ -27,6 +27,7 @@ from ..study.shapes import (
     sheet_shape,
     small_turn,
     spiky_shape,
+    strut_shape,
 )
 from ..voxelize import voxelize
 
@@ -70,7 +71,7 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
                   wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0,
-                  spikes: float = 0.0, layered: float = 0.0) -> dict:
+                  spikes: float = 0.0, layered: float = 0.0, struts: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -90,8 +91,11 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     share of the samples other than sheets and spiky shapes that become a layered part instead
     (``shapes.layered_shape``, layers ``LAYER_VOXELS`` thick at the recipe's resolution, family
     "layered", field ``layer_voxels``, no wrinkles, placed by the shape function alone), from a
-    stream of its own. The recipe also records the shape family and whether the sample is
-    grid-aligned.
+    stream of its own. ``struts`` is the share of the samples other than sheets, spiky shapes
+    and layered parts that become a frame of thin struts instead (``shapes.strut_shape`` at the
+    recipe's voxel, family "struts", field ``struts``, no wrinkles, placed by the shape function
+    alone), from a stream of its own. The recipe also records the shape family and whether the
+    sample is grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
@@ -141,6 +145,13 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         recipe.update(family="layered", rotation=np.eye(3).tolist(),
                       axis_aligned=generator_aligned,
                       layer_voxels=float(layer_rng.uniform(*LAYER_VOXELS)))
+    strut_rng = np.random.default_rng([seed, 1234, 13])
+    if (struts > 0 and strut_rng.random() < struts and "sheet_voxels" not in recipe
+            and not recipe.get("spikes") and "layer_voxels" not in recipe):
+        recipe.pop("wrinkles", None)
+        recipe.pop("tilt_degrees", None)
+        recipe.update(family="struts", rotation=np.eye(3).tolist(),
+                      axis_aligned=generator_aligned, struts=True)
     return recipe
 
 
@@ -166,6 +177,8 @@ def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
                                       recipe["sheet_voxels"] / (recipe["resolution"] - 2))
     elif recipe.get("spikes"):
         vertices, faces = spiky_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
+    elif recipe.get("struts"):
+        vertices, faces = strut_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
     elif "layer_voxels" in recipe:
         voxel = 1.0 / (recipe["resolution"] - 2)
         vertices, faces = layered_shape(recipe["seed"], voxel, recipe["layer_voxels"] * voxel)
@@ -219,7 +232,7 @@ def _write_one(args) -> str:
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
                   resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
                   sheets: float = 0.0, tilted: float = 0.0, spikes: float = 0.0,
-                  layered: float = 0.0) -> list[Path]:
+                  layered: float = 0.0, struts: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -237,7 +250,8 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted,
-                           spikes=spikes, layered=layered), out_dir / f"sample_{seed:06d}.npz")
+                           spikes=spikes, layered=layered, struts=struts),
+             out_dir / f"sample_{seed:06d}.npz")
             for seed in range(seed0, seed0 + n)]
     if workers > 1:
         with get_context("spawn").Pool(workers) as pool:
