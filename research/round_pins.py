@@ -11,9 +11,10 @@ UNDC. ``--stages`` adds AGNDC and UNDC without the flat patches (and with them t
 and stepped floors), AGNDC without the normal filter and AGNDC without the terraced planes.
 ``--round-strips WIDTH,SHARE`` runs with ``research/round_strips.py``'s rule,
 ``--quadratic-strips CELLS,BEND,SHARE`` with its ``--quadratic`` rule.
-``--figure PNG`` draws instead the first radius's cylinder on the grid shifted by ``--shift``,
-by AGNDC without and with the terraced planes' round test (``flatpatches._round``), flat-shaded:
-its top fifth, seen from above at a slant (the cap's outline and the side).
+``--also LABEL=METHOD[:PATH]`` scores another method beside them (another network's weights
+with PATH). ``--figure PNG`` draws instead the first radius's cylinder on the grid shifted by
+``--shift``, by AGNDC without and with the terraced planes' round test (``flatpatches._round``),
+flat-shaded: its top fifth, seen from above at a slant (the cap's outline and the side).
 docs/experiments/flat-patches.md ("Known loss: thin round parts along an axis") has the
 measurements.
 """
@@ -79,6 +80,9 @@ def main() -> None:
                         help="research/round_strips.py's rule in the flat-patch stage")
     parser.add_argument("--quadratic-strips", default="", metavar="CELLS,BEND,SHARE",
                         help="research/round_strips.py --quadratic's rule in the flat-patch stage")
+    parser.add_argument("--also", action="append", default=[], metavar="LABEL=METHOD[:PATH]",
+                        help="score another method too, with a checkpoint of its own if PATH "
+                        "is given (repeatable), e.g. fast=agndc_fast or s23=agndc_fast:run.st")
     parser.add_argument("--figure", default="", metavar="PNG")
     parser.add_argument("--shift", default="-0.21,-0.45,-0.12", metavar="X,Y,Z",
                         help="the grid's shift for --figure, voxels")
@@ -110,6 +114,10 @@ def main() -> None:
             "agndc, no flat patches": {"method": "agndc", "flat_patches": False},
             "agndc, no normal filter": {"method": "agndc", "normal_filter": False},
             "agndc, no terraced planes": {"method": "agndc", "terraced_planes": False}})
+    for spec in args.also:
+        label, _, method = spec.partition("=")
+        method, _, path = method.partition(":")
+        variants[label] = {"method": method, "checkpoint": path or None}
     rng = np.random.default_rng(5)
     shifts = [tuple(rng.uniform(-0.5, 0.5, 3)) for _ in range(args.shifts)]
     for radius in (float(r) for r in args.radii.split(",")):
