@@ -25,6 +25,9 @@
 # AGNDC_LAYERED=SHARE: the share of layered parts (caps, lids, stepped plates: `agndc train-data
 # --layered`, default 0; the CPU lineage's stages 16-17 had 21 %, which gained on the thin
 # sheets with both seeds, docs/experiments/layered-parts.md), its own folder too.
+# AGNDC_STRUTS=SHARE: the share of thin-strut frames (pavilions on columns, space frames,
+# railings, wire rings: `agndc train-data --struts`, default 0; docs/experiments/thin-struts.md),
+# its own folder too.
 # AGNDC_SCORE=SHARDS (one run only): the run's newest checkpoint (final, else the last --val-steps
 # one) scored on the validation family and the thin sheets beside the shipped weights once the
 # wait is over (research/score_validation_parallel.sh on SHARDS processes, a divisor of 24, e.g.
@@ -80,7 +83,8 @@ resolutions=${AGNDC_RESOLUTIONS:-32,128}
 wrinkled=${AGNDC_WRINKLED:-0.5}
 sheets=${AGNDC_SHEETS:-0.15}
 layered=${AGNDC_LAYERED:-0}
-train="$data/train_${resolutions/,/-}_w${wrinkled}_s${sheets}_l$layered"
+struts=${AGNDC_STRUTS:-0}
+train="$data/train_${resolutions/,/-}_w${wrinkled}_s${sheets}_l${layered}_t$struts"
 mkdir -p /tmp/agndc_runs
 agndc train-data -o "$data/val" -n 24 --seed0 1000000 --workers 16 2>/dev/null
 genpid=/tmp/agndc_runs/datagen.pid
@@ -89,7 +93,7 @@ genpid=/tmp/agndc_runs/datagen.pid
 start_datagen() {
     alive "$genpid" && return 0
     setsid nohup "$py" -m agndc_core.cli train-data -o "$train" --resolutions "$resolutions" \
-        --wrinkled "$wrinkled" --sheets "$sheets" --layered "$layered" \
+        --wrinkled "$wrinkled" --sheets "$sheets" --layered "$layered" --struts "$struts" \
         -n "${AGNDC_SAMPLES:-5000}" --workers "$1" \
         >/tmp/agndc_runs/datagen.log 2>&1 </dev/null &
     echo $! >"$genpid"
@@ -160,7 +164,8 @@ if [ "$#" -gt 0 ] && [ "$need" = 1 ]; then
     fi
     while alive "$genpid"; do sleep 2; done
     agndc train-data -o "$train" --resolutions "$resolutions" --wrinkled "$wrinkled" \
-        --sheets "$sheets" --layered "$layered" -n "${AGNDC_SAMPLES:-5000}" --workers 16 2>/dev/null
+        --sheets "$sheets" --layered "$layered" --struts "$struts" -n "${AGNDC_SAMPLES:-5000}" \
+        --workers 16 2>/dev/null
     echo "data ready after $(( $(date +%s) - start )) s: $(ls "$train" | wc -l) samples"
     while read -r name own; do
         # word splitting of the study line's options is intended (no quoting inside a line)
