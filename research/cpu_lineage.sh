@@ -22,11 +22,10 @@
 # at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
 # the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
 # continued 3,000 steps at half its learning rate again; its step 2,000 is the shipped
-# agndc_fast (agndc_student.safetensors). Stage 21: the shipped agndc_fast continued 3,000 steps
-# on the true targets (not the teacher's) of DATA, the sheets and the layered parts, at stage
-# 19's learning rate: whether the ground truth takes the student past its teacher on the thin
-# plates it loses (plate_holes, screw). Stage 22, its control: the shipped agndc_fast continued
-# 2,000 steps on the teacher's targets at half stage 19's learning rate. A stage is kept short (80-120 min where a step
+# agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
+# on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
+# of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
+# like the rest; docs/experiments/thin-struts.md). A stage is kept short (80-120 min where a step
 # takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -40,7 +39,10 @@
 # shipped weights on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with
 # 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md). Stage 20:
 # the shipped UNDC (stage 18) continued 3,000 steps on the same data at half its learning rate
-# (closer on the family, farther on the thin sheets: docs/training.md).
+# (closer on the family, farther on the thin sheets: docs/training.md). Stage 21: the shipped
+# agndc_fast continued on the true targets (not the teacher's) of DATA, the sheets and the
+# layered parts at stage 19's learning rate, stopped after step 2,000: farther on the family
+# and the thin sheets (docs/experiments/student.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -106,8 +108,8 @@ current)
     # the stages whose verdict is open, so that a machine with only the repository starts
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
-    # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 21 (the
-    # shipped agndc_fast on the true targets) and 22 (its control on the teacher's targets)
+    # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
+    # shipped agndc_fast continued) and 23 (22 with thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -133,20 +135,24 @@ current)
     stage student_agndc16_cont2 --data "${data}_distilled,${sheets}_distilled" \
         --init "$runs/student_agndc16_cont/final.safetensors" --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 24 --val-steps 1000,2000,3000
-    # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's, on
-    # DATA, the sheets and the layered parts, at stage 19's learning rate
-    stage student_true16 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
-        --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 26 --val-steps 1000,2000,3000
     # stage 22: the shipped agndc_fast continued on the teacher's targets at half stage 19's
-    # learning rate, stage 21's control
+    # learning rate
     stage student_agndc16_cont3 --data "${data}_distilled,${sheets}_distilled" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
+    # stage 23: stage 22 with 300 thin-strut frames added (train-data --struts 1.0), distilled
+    # by the teacher like the rest
+    struts="${data}_struts"
+    generate "$struts" -n 300 --seed0 70000 --struts 1.0
+    distil "$struts" "${struts}_distilled"
+    stage student_struts16 \
+        --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14 and 20, rerun from their own starts
+    # 8-12, 14, 20 and 21, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -176,6 +182,13 @@ concluded)
     stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
         --steps 3000 --val-steps 1000,2000,3000
+    # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's
+    # (its verdict read at steps 1,000 and 2,000, where it was stopped)
+    layered="${data}_layered"
+    generate "$layered" -n 300 --seed0 60000 --layered 1.0
+    stage student_true16 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 26 --val-steps 1000,2000,3000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
