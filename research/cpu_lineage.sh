@@ -25,8 +25,9 @@
 # agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). A stage is kept short (80-120 min where a step
-# takes ~6 s).
+# like the rest; docs/experiments/thin-struts.md). Stage 24: stage 20 (the shipped UNDC
+# continued, in concluded) with the strut frames added on their true targets. A stage is kept
+# short (80-120 min where a step takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
 # shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
@@ -109,7 +110,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued) and 23 (22 with thin struts added)
+    # shipped agndc_fast continued), 23 (22 with thin struts added) and 24 (the UNDC of stage
+    # 20 with thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -149,6 +151,12 @@ current)
         --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
+    # stage 24: stage 20 (the shipped UNDC continued) with the thin-strut frames added, on
+    # their true targets: whether the data teaches thin bars (stage 20 is its control)
+    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
+    stage undc_struts16 --undc --model '{"width": 16}' --data "$data,$wrinkled,$struts" \
+        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
