@@ -26,8 +26,10 @@
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
 # like the rest; docs/experiments/thin-struts.md). Stage 24: stage 20 (the shipped UNDC
-# continued, in concluded) with the strut frames added on their true targets. A stage is kept
-# short (80-120 min where a step takes ~6 s).
+# continued, in concluded) with the strut frames added on their true targets: closer on the
+# struts than stage 20 (docs/experiments/thin-struts.md). Stage 25: the shipped AGNDC, the
+# students' teacher, continued on DATA, the sheets and the strut frames (stage 14's recipe). A
+# stage is kept short (80-120 min where a step takes ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
 # shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
@@ -110,8 +112,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued), 23 (22 with thin struts added) and 24 (the UNDC of stage
-    # 20 with thin struts added)
+    # shipped agndc_fast continued), 23 (22 with thin struts added), 24 (the UNDC of stage 20
+    # with thin struts added) and 25 (the shipped AGNDC with thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -157,6 +159,11 @@ current)
     stage undc_struts16 --undc --model '{"width": 16}' --data "$data,$wrinkled,$struts" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
         --steps 3000 --val-steps 1000,2000,3000
+    # stage 25: the shipped AGNDC (the students' teacher) continued on DATA, the sheets and
+    # the strut frames, stage 14's recipe with the frames in place of the spiky shapes
+    stage strut_agndc16 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
