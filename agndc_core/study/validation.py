@@ -558,35 +558,36 @@ def validation_shape(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     raise RuntimeError(f"validation seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
 
 
+def _family_shape(seed: int, stream: int, builders: dict, kind: str, aligned_share: float):
+    """(kind, builder name, vertices, faces) of one seed of a family beside the main one: a
+    builder of ``builders`` ({name: (function, weight)}, drawn by weight when there are several)
+    on the family's own ``stream``, placed by ``_place`` with ``aligned_share`` on the axes."""
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, SEED_STREAM, attempt, stream))
+        if len(builders) > 1:
+            name, build = _draw(rng, builders)
+        else:
+            (name, (build, _)), = builders.items()
+        m = build(rng, int(rng.integers(24, 65)))
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        m = _place(m, rng, kind, aligned_share=aligned_share)
+        vertices, faces = _to_arrays(_drop_slivers(m))
+        if _edge_manifold(faces):
+            return kind, name, vertices, faces
+    raise RuntimeError(f"{name} seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+
+
 def validation_sheet(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     """``validation_shape`` of the thin-sheet family: ("cad", "sheet", vertices, faces),
     deterministic in the seed (its own stream)."""
-    for attempt in range(MAX_ATTEMPTS):
-        rng = np.random.default_rng((seed, SEED_STREAM, attempt, 1))
-        m = _sheet(rng, int(rng.integers(24, 65)))
-        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
-            continue
-        m = _place(m, rng, "cad", aligned_share=SHEET_ALIGNED_SHARE)
-        vertices, faces = _to_arrays(_drop_slivers(m))
-        if _edge_manifold(faces):
-            return "cad", "sheet", vertices, faces
-    raise RuntimeError(f"sheet seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+    return _family_shape(seed, 1, {"sheet": (_sheet, 1.0)}, "cad", SHEET_ALIGNED_SHARE)
 
 
 def validation_strut(seed: int) -> tuple[str, str, np.ndarray, np.ndarray]:
     """``validation_shape`` of the thin-strut family: ("print", builder name, vertices,
     faces), deterministic in the seed (its own stream)."""
-    for attempt in range(MAX_ATTEMPTS):
-        rng = np.random.default_rng((seed, SEED_STREAM, attempt, 2))
-        name, build = _draw(rng, STRUT_BUILDERS)
-        m = build(rng, int(rng.integers(24, 65)))
-        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
-            continue
-        m = _place(m, rng, "print", aligned_share=STRUT_ALIGNED_SHARE)
-        vertices, faces = _to_arrays(_drop_slivers(m))
-        if _edge_manifold(faces):
-            return "print", name, vertices, faces
-    raise RuntimeError(f"strut seed {seed}: no usable shape in {MAX_ATTEMPTS} attempts")
+    return _family_shape(seed, 2, STRUT_BUILDERS, "print", STRUT_ALIGNED_SHARE)
 
 
 #: the shape functions of ``write_family``'s families and their first seeds

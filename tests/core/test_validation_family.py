@@ -165,3 +165,11 @@ def test_struts_are_closed_frames_of_bars_as_thin_as_drawn(tmp_path):
     rows = write_family(tmp_path, 2, workers=1, family="struts")
     assert [r["seed"] for r in rows] == [STRUT_SEED0, STRUT_SEED0 + 1]
     assert [category for _, category in find_meshes(tmp_path)] == ["printed"] * 2
+
+
+def test_a_family_whose_builder_never_succeeds_raises():
+    from manifold3d import Manifold
+
+    with pytest.raises(RuntimeError, match="no usable shape"):
+        validation._family_shape(7, 3, {"empty": (lambda rng, segs: Manifold(), 1.0)}, "cad",
+                                 0.5)
