@@ -378,4 +378,8 @@ def test_strut_recipes_keep_the_other_draws_and_build_frames_of_thin_bars():
     assert np.mean(plain_depths) > 2 * np.mean(depths)
     v, _ = strut_shape(made[0]["seed"], 1 / 62)  # deterministic
     np.testing.assert_array_equal(v, strut_shape(made[0]["seed"], 1 / 62)[0])
+    for seed in range(12):  # every kind of frame (pavilions, space frames, railings, rings)
+        mesh = trimesh.Trimesh(*strut_shape(seed, 1 / 62), process=False)
+        assert mesh.is_watertight and mesh.volume > 0, seed
+        assert np.ptp(mesh.vertices, axis=0).max() == pytest.approx(1.0, abs=1e-9)
     assert make_sample(made[0])["lattice"].any()
