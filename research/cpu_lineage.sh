@@ -25,9 +25,7 @@
 # agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). Stage 25: the shipped AGNDC, the students'
-# teacher, continued on DATA, the sheets and the strut frames (stage 14's recipe), since the
-# frames taught UNDC thin bars (stage 24). A stage is kept short (80-120 min where a step takes
+# like the rest; docs/experiments/thin-struts.md). A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -46,8 +44,10 @@
 # layered parts at stage 19's learning rate, stopped after step 2,000: farther on the family
 # and the thin sheets (docs/experiments/student.md). Stage 24: stage 20 with the strut frames
 # added on their true targets: closer on the thin-strut validation family than stage 20 (29 of
-# 36 shapes), level on the family, farther on the thin sheets
-# (docs/experiments/thin-struts.md).
+# 36 shapes), level on the family, farther on the thin sheets. Stage 25: the shipped AGNDC
+# continued on DATA, the sheets and the strut frames (stage 14's recipe): its step 400 closer on
+# the centred frames, not on shifted grids; its step 800 level on the family, farther on the
+# sheets (docs/experiments/thin-struts.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -114,8 +114,7 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued), 23 (22 with thin struts added) and 25 (the shipped AGNDC
-    # with thin struts added)
+    # shipped agndc_fast continued) and 23 (22 with thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -155,15 +154,10 @@ current)
         --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
-    # stage 25: the shipped AGNDC (the students' teacher) continued on DATA, the sheets and
-    # the strut frames, stage 14's recipe with the frames in place of the spiky shapes
-    stage strut_agndc16 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14, 20, 21 and 24, rerun from their own starts
+    # 8-12, 14, 20, 21, 24 and 25, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -199,6 +193,11 @@ concluded)
     stage undc_struts16 --undc --model '{"width": 16}' --data "$data,$wrinkled,$struts" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
         --steps 3000 --val-steps 1000,2000,3000
+    # stage 25: the shipped AGNDC (the students' teacher) continued on DATA, the sheets and
+    # the strut frames, stage 14's recipe with the frames in place of the spiky shapes
+    stage strut_agndc16 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
     # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's
     # (its verdict read at steps 1,000 and 2,000, where it was stopped)
     layered="${data}_layered"
