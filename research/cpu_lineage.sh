@@ -25,7 +25,9 @@
 # agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). A stage is kept short (80-120 min where a step takes
+# like the rest; docs/experiments/thin-struts.md). Stage 26: stage 24 (in concluded: UNDC with
+# the strut frames, closer on them, farther on the thin sheets) with the sheets in its data
+# too. A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -114,7 +116,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued) and 23 (22 with thin struts added)
+    # shipped agndc_fast continued), 23 (22 with thin struts added) and 26 (UNDC with the
+    # strut frames and the sheets)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -154,6 +157,13 @@ current)
         --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
+    # stage 26: stage 24 (UNDC with the strut frames) with the thin sheets in its data too:
+    # whether the sheets keep what the frames cost them
+    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
+    stage undc_struts16_sheets --undc --model '{"width": 16}' \
+        --data "$data,$wrinkled,$sheets,$struts" \
+        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
+        --steps 3000 --val-steps 1000,2000,3000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
