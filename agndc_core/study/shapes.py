@@ -1060,6 +1060,13 @@ def strut(a, b, radius: float, sides: int) -> Manifold:
     return Manifold.cylinder(length + 2 * radius, radius, radius, int(sides)).transform(affine)
 
 
+def grid_edges(nodes: np.ndarray, axis: int) -> np.ndarray:
+    """(E, 2, 3) end points of the edges along ``axis`` of a grid of ``nodes`` (X, Y, Z, 3):
+    each node paired with its neighbour one step up that axis."""
+    a = np.moveaxis(nodes, axis, 0)
+    return np.stack([a[:-1], a[1:]], axis=-2).reshape(-1, 2, 3)
+
+
 def _tower(rng, r: float, sides: int, segs: int) -> list[Manifold]:
     """A pavilion: a base and a roof slab (a disc or a rounded rectangle, 1.5-5 struts thick)
     on 3-12 columns round their rim, sometimes a ring beam half-way and a spire on the roof."""
@@ -1083,11 +1090,9 @@ def _tower(rng, r: float, sides: int, segs: int) -> list[Manifold]:
     parts += [strut((*f, slab), (*f, height - slab), r, sides) for f in feet]
     if rng.random() < 0.4:  # a ring beam joining the columns half-way
         z = height * rng.uniform(0.3, 0.7)
-        loop = np.vstack([feet, feet[:1]]) if round_plan else feet[[*range(0, len(feet) // 2),
-                                                                   *range(len(feet) - 1,
-                                                                          len(feet) // 2 - 1,
-                                                                          -1), 0]]
-        parts += [strut((*p, z), (*q, z), r, sides) for p, q in zip(loop[:-1], loop[1:])]
+        # round the rim: a rectangular plan's second row of columns walked backwards
+        ring = feet if round_plan else feet[np.r_[:k, 2 * k - 1:k - 1:-1]]
+        parts += [strut((*p, z), (*q, z), r, sides) for p, q in zip(ring, np.roll(ring, -1, 0))]
     if rng.random() < 0.4:  # a spire
         parts.append(strut((0, 0, height - slab), (0, 0, height + rng.uniform(0.1, 0.3)), r,
                            sides))
@@ -1103,9 +1108,8 @@ def _truss(rng, r: float, sides: int) -> list[Manifold]:
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)  # (cx+1, cy+1, cz+1, 3)
     nodes = nodes + rng.normal(0.0, 0.01, nodes.shape)
     parts = []
-    for axis in range(3):  # grid edges along each axis
-        a = np.moveaxis(nodes, axis, 0)
-        pairs = np.stack([a[:-1], a[1:]], axis=-2).reshape(-1, 2, 3)
+    for axis in range(3):
+        pairs = grid_edges(nodes, axis)
         keep = rng.random(len(pairs)) < 0.85
         parts += [strut(p, q, r, sides) for p, q in pairs[keep]]
     lo = nodes[:-1, :-1, :-1].reshape(-1, 3)

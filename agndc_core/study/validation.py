@@ -56,6 +56,7 @@ from .shapes import (
     _smooth_curve,
     _to_arrays,
     field_surface,
+    grid_edges,
     small_turn,
     strut,
 )
@@ -424,14 +425,10 @@ def _lattice_cube(rng, segs) -> Manifold:
     size = cells / cells.max()
     axes = [np.linspace(-s / 2, s / 2, c + 1) for s, c in zip(size, cells)]
     nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
-    bars = []
-    for axis in range(3):  # the grid's edges along each axis
-        a = np.moveaxis(nodes, axis, 0)
-        bars += [strut(p, q, r, sides) for p, q in np.stack([a[:-1], a[1:]], -2).reshape(-1, 2, 3)]
+    bars = [strut(p, q, r, sides) for axis in range(3) for p, q in grid_edges(nodes, axis)]
     if rng.random() < 0.4:  # x-bracing in the faces normal to z
-        a = nodes
         bars += [strut(p, q, r * 0.8, sides) for p, q in zip(
-            a[:-1, :-1, :].reshape(-1, 3), a[1:, 1:, :].reshape(-1, 3))]
+            nodes[:-1, :-1, :].reshape(-1, 3), nodes[1:, 1:, :].reshape(-1, 3))]
     return Manifold.batch_boolean(bars, OpType.Add)
 
 
@@ -566,7 +563,7 @@ def _family_shape(seed: int, stream: int, builders: dict, kind: str, aligned_sha
         rng = np.random.default_rng((seed, SEED_STREAM, attempt, stream))
         if len(builders) > 1:
             name, build = _draw(rng, builders)
-        else:
+        else:  # nothing drawn: the sheets keep the shapes of their seeds
             (name, (build, _)), = builders.items()
         m = build(rng, int(rng.integers(24, 65)))
         if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:

@@ -172,15 +172,16 @@ def wrinkle_mesh(vertices: np.ndarray, faces: np.ndarray, wrinkles: dict):
 
 def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
     """The ground-truth mesh of a recipe: (V, 3) float64, (F, 3) int64."""
-    if "sheet_voxels" in recipe:  # voxelize spans the longest side (1) with resolution - 2
+    # one voxel of the recipe's grid: voxelize spans the longest side (1) with resolution - 2
+    voxel = 1.0 / (recipe["resolution"] - 2)
+    if "sheet_voxels" in recipe:  # divided, not times voxel: the same sheet to the last bit
         vertices, faces = sheet_shape(recipe["seed"],
                                       recipe["sheet_voxels"] / (recipe["resolution"] - 2))
     elif recipe.get("spikes"):
-        vertices, faces = spiky_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
+        vertices, faces = spiky_shape(recipe["seed"], voxel)
     elif recipe.get("struts"):
-        vertices, faces = strut_shape(recipe["seed"], 1.0 / (recipe["resolution"] - 2))
+        vertices, faces = strut_shape(recipe["seed"], voxel)
     elif "layer_voxels" in recipe:
-        voxel = 1.0 / (recipe["resolution"] - 2)
         vertices, faces = layered_shape(recipe["seed"], voxel, recipe["layer_voxels"] * voxel)
     else:
         vertices, faces = generate_shape(recipe["seed"])
