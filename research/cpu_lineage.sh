@@ -25,9 +25,10 @@
 # agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). Stage 26: stage 24 (in concluded: UNDC with
-# the strut frames, closer on them, farther on the thin sheets) with the sheets in its data
-# too. A stage is kept short (80-120 min where a step takes
+# like the rest; docs/experiments/thin-struts.md). Stage 27: stage 25 (in concluded: the
+# shipped AGNDC on DATA, the sheets and the frames) at three times its learning rate. Stage 28:
+# stage 23 with the frames on their true targets, the rest still the teacher's. A stage is kept
+# short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -49,7 +50,8 @@
 # 36 shapes), level on the family, farther on the thin sheets. Stage 25: the shipped AGNDC
 # continued on DATA, the sheets and the strut frames (stage 14's recipe): its step 400 closer on
 # the centred frames, not on shifted grids; its step 800 level on the family, farther on the
-# sheets (docs/experiments/thin-struts.md).
+# sheets (docs/experiments/thin-struts.md). Stage 26: stage 24 with the thin sheets in its data
+# too: level on the family, closer on the struts, farther on the sheets than the shipped UNDC.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -116,8 +118,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued), 23 (22 with thin struts added) and 26 (UNDC with the
-    # strut frames and the sheets)
+    # shipped agndc_fast continued), 23 (22 with thin struts added), 27 (stage 25 at three
+    # times the learning rate) and 28 (23 with the frames on their true targets)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -157,17 +159,22 @@ current)
         --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
-    # stage 26: stage 24 (UNDC with the strut frames) with the thin sheets in its data too:
-    # whether the sheets keep what the frames cost them
-    generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
-    stage undc_struts16_sheets --undc --model '{"width": 16}' \
-        --data "$data,$wrinkled,$sheets,$struts" \
-        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
-        --steps 3000 --val-steps 1000,2000,3000
+    # stage 27: stage 25 (the shipped AGNDC on DATA, the sheets and the strut frames) at three
+    # times its learning rate, the same seed and crops: whether the full cascade learns the
+    # bars when it is let move as far as UNDC did
+    stage strut_agndc16_lr15 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 28: stage 23 with the strut frames on their true targets (the rest still the
+    # teacher's): whether the student learns the bars that its teacher never saw
+    stage student_struts16_true \
+        --data "${data}_distilled,${sheets}_distilled,${struts}" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14, 20, 21, 24 and 25, rerun from their own starts
+    # 8-12, 14, 20, 21 and 24-26, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -201,6 +208,11 @@ concluded)
     struts="${data}_struts"
     generate "$struts" -n 300 --seed0 70000 --struts 1.0
     stage undc_struts16 --undc --model '{"width": 16}' --data "$data,$wrinkled,$struts" \
+        --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
+        --steps 3000 --val-steps 1000,2000,3000
+    # stage 26: stage 24 with the thin sheets in its data too
+    stage undc_struts16_sheets --undc --model '{"width": 16}' \
+        --data "$data,$wrinkled,$sheets,$struts" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
         --steps 3000 --val-steps 1000,2000,3000
     # stage 25: the shipped AGNDC (the students' teacher) continued on DATA, the sheets and
