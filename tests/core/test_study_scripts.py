@@ -187,6 +187,10 @@ def test_compared_rows_keep_the_shared_grids_and_count_lower_cds(tmp_path):
     assert sorted((r["method"], r["name"]) for r in rows) == sorted(
         [(m, n) for n in ("a", "b") for m in ("mc", "oracle_binary", "reference", "new")])
     assert {r["mesh"] for r in rows} == {"a.obj", "b.obj"}  # one shape counted once
+    # the paired difference, shape by shape, on the grids both scored: a -0.5, b +0.5 (b's
+    # shift 1 has no reference grid, d's reference is an error row)
+    mean, error, shapes = compare_rows.paired_cd(ref_rows, compare_rows.read_rows(paths[1]))
+    assert shapes == 2 and mean == pytest.approx(0.0) and error == pytest.approx(0.5)
 
 
 def test_thin_cells_are_the_surface_cells_of_parts_no_deeper_than_asked():
