@@ -26,9 +26,8 @@
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
 # like the rest; docs/experiments/thin-struts.md). Stage 27: stage 25 (in concluded: the
-# shipped AGNDC on DATA, the sheets and the frames) at three times its learning rate. Stage 28:
-# stage 23 with the frames on their true targets, the rest still the teacher's. A stage is kept
-# short (80-120 min where a step takes
+# shipped AGNDC on DATA, the sheets and the frames) at three times its learning rate. Stage 29:
+# stage 27's step 400 continued at 5e-5. A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -52,6 +51,8 @@
 # the centred frames, not on shifted grids; its step 800 level on the family, farther on the
 # sheets (docs/experiments/thin-struts.md). Stage 26: stage 24 with the thin sheets in its data
 # too: level on the family, closer on the struts, farther on the sheets than the shipped UNDC.
+# Stage 28: stage 23 with the frames on their true targets: the student closer on the struts,
+# farther on the thin sheets.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -119,7 +120,8 @@ current)
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
     # shipped agndc_fast continued), 23 (22 with thin struts added), 27 (stage 25 at three
-    # times the learning rate) and 28 (23 with the frames on their true targets)
+    # times the learning rate) and 29 (27's step 400 continued at a third of its learning
+    # rate)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -165,16 +167,16 @@ current)
     stage strut_agndc16_lr15 --data "$data,$sheets,$struts" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 28: stage 23 with the strut frames on their true targets (the rest still the
-    # teacher's): whether the student learns the bars that its teacher never saw
-    stage student_struts16_true \
-        --data "${data}_distilled,${sheets}_distilled,${struts}" \
-        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
-        --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
+    # stage 29: stage 27's step 400 (closer than its step 800 on every frame) continued at a
+    # third of its learning rate on the same data (the higher rate, then the lower one, as
+    # stages 5 and 6 made the shipped weights)
+    stage strut_agndc16_lr15_cont --data "$data,$sheets,$struts" \
+        --init "$runs/strut_agndc16_lr15/step-000400.safetensors" --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 18 --steps 800,0,0 --val-steps 400,800
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14, 20, 21 and 24-26, rerun from their own starts
+    # 8-12, 14, 20, 21, 24-26 and 28, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -227,6 +229,14 @@ concluded)
     stage student_true16 --data "$data,$sheets,$layered" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 3000,0,0 --lr 1.25e-4 --ema 0.99 --seed 26 --val-steps 1000,2000,3000
+    # stage 28: stage 23 with the strut frames on their true targets (the rest still the
+    # teacher's): the student's bars closer, the thin sheets farther
+    distil "$data" "${data}_distilled"
+    distil "$sheets" "${sheets}_distilled"
+    stage student_struts16_true \
+        --data "${data}_distilled,${sheets}_distilled,${struts}" \
+        --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
+        --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
