@@ -3,14 +3,16 @@
 # spikes and the layered caps, on the frames a shipping decision needs (docs/training.md,
 # "Evaluating"), and compare it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/, sheets/, spikes/, spikes_thin/ and caps/ (made by `bash
-# research/score_validation.sh VAL data`: agndc val-data, 48 shapes and 24 sheets;
+# VAL holds family/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/ and caps/ (made by `bash
+# research/score_validation.sh VAL data`: agndc val-data, 48 shapes, 24 sheets, 48 more sheets
+# from their own seeds (the sheets are the noisiest frame), 36 thin-strut shapes;
 # research/spike_rows.py, 12 rows of cones 2-6 and 12 of cones 0.8-2 voxels in radius at the
 # base; research/layered_caps.py, 24 caps of layers about a voxel thick; ~1 min). NAME without
 # a CHECKPOINT scores the shipped weights, together with marching cubes and oracle_binary (the
-# reference; run it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s": 64 /
-# 128 the family centred, 64s / 128s on 3 shifted grids per shape, sheets / sheets_s the sheets
-# at 64^3, spikes / spikes_thin the rows of cones at 64^3, caps the layered caps at 64^3. A
+# reference; run it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s
+# sheets_b": 64 / 128 the family centred, 64s / 128s on 3 shifted grids per shape, sheets /
+# sheets_s the sheets at 64^3, sheets_b the second set of sheets, struts the thin struts,
+# spikes / spikes_thin the rows of cones at 64^3, caps the layered caps at 64^3. A
 # finished frame is skipped. Results:
 # OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
@@ -21,6 +23,9 @@ agndc=.venv/bin/agndc
 if [[ ${2:-} == data ]]; then  # the validation data, once
     [[ -f $val/family/MANIFEST.csv ]] || $agndc val-data -o "$val/family" -n 48
     [[ -f $val/sheets/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets" -n 24
+    [[ -f $val/sheets_b/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets_b" \
+        --seed0 3000100 -n 48
+    [[ -f $val/struts/MANIFEST.csv ]] || $agndc val-data --struts -o "$val/struts" -n 36
     [[ -f $val/spikes/MANIFEST.csv ]] || .venv/bin/python research/spike_rows.py \
         -o "$val/spikes" -n 12
     [[ -f $val/spikes_thin/MANIFEST.csv ]] || .venv/bin/python research/spike_rows.py \
@@ -31,7 +36,7 @@ if [[ ${2:-} == data ]]; then  # the validation data, once
 fi
 out=$2 name=$3
 checkpoint=${4:-}
-frames=${5:-64 64s sheets sheets_s}
+frames=${5:-64 64s sheets sheets_s sheets_b}
 if [[ -n $checkpoint ]]; then
     methods=(--methods agndc --checkpoint "agndc=$checkpoint")
 else
@@ -45,11 +50,13 @@ for frame in $frames; do
         128s) args=("$val/family" --res 128 --shifts 3) ;;
         sheets) args=("$val/sheets" --res 64) ;;
         sheets_s) args=("$val/sheets" --res 64 --shifts 3) ;;
+        sheets_b) args=("$val/sheets_b" --res 64) ;;
+        struts) args=("$val/struts" --res 64) ;;
         spikes) args=("$val/spikes" --res 64) ;;
         spikes_thin) args=("$val/spikes_thin" --res 64) ;;
         caps) args=("$val/caps" --res 64) ;;
-        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s spikes spikes_thin" \
-                "caps)" >&2
+        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s sheets_b struts" \
+                "spikes spikes_thin caps)" >&2
            exit 2 ;;
     esac
     dest=$out/$name/$frame
