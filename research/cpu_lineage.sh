@@ -27,7 +27,8 @@
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
 # like the rest; docs/experiments/thin-struts.md). Stage 27: stage 25 (in concluded: the
 # shipped AGNDC on DATA, the sheets and the frames) at three times its learning rate. Stage 29:
-# stage 27's step 400 continued at 5e-5. A stage is kept short (80-120 min where a step takes
+# stage 27's step 400 continued at 5e-5. Stage 30: stage 27 with another seed. A stage is kept
+# short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -120,8 +121,8 @@ current)
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
     # shipped agndc_fast continued), 23 (22 with thin struts added), 27 (stage 25 at three
-    # times the learning rate) and 29 (27's step 400 continued at a third of its learning
-    # rate)
+    # times the learning rate), 29 (27's step 400 continued at a third of its learning rate)
+    # and 30 (27 with another seed)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -173,6 +174,12 @@ current)
     stage strut_agndc16_lr15_cont --data "$data,$sheets,$struts" \
         --init "$runs/strut_agndc16_lr15/step-000400.safetensors" --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 18 --steps 800,0,0 --val-steps 400,800
+    # stage 30: stage 27 with another seed (other crops): stages 25 and 27 drew the same crops,
+    # so whether their step-400 signature (closer centred, farther on shifted grids, softer
+    # edges) is the recipe's or those crops'
+    stage strut_agndc16_lr15_seed19 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 1.5e-4 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
