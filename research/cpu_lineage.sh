@@ -25,10 +25,9 @@
 # agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
 # on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). Stage 27: stage 25 (in concluded: the
-# shipped AGNDC on DATA, the sheets and the frames) at three times its learning rate. Stage 29:
-# stage 27's step 400 continued at 5e-5. Stage 30: stage 27 with another seed. A stage is kept
-# short (80-120 min where a step takes
+# like the rest; docs/experiments/thin-struts.md). Stage 30: stage 27 (in concluded: stage 25,
+# the shipped AGNDC on DATA, the sheets and the frames, at three times its learning rate) with
+# another seed. A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -53,7 +52,9 @@
 # sheets (docs/experiments/thin-struts.md). Stage 26: stage 24 with the thin sheets in its data
 # too: level on the family, closer on the struts, farther on the sheets than the shipped UNDC.
 # Stage 28: stage 23 with the frames on their true targets: the student closer on the struts,
-# farther on the thin sheets.
+# farther on the thin sheets. Stage 27: stage 25 at three times its learning rate: its step 400
+# closer centred and at 128^3 and on the sheets, farther on shifted grids, softer edges. Stage
+# 29: that step 400 continued at 5e-5: the centred gains given back.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -120,9 +121,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued), 23 (22 with thin struts added), 27 (stage 25 at three
-    # times the learning rate), 29 (27's step 400 continued at a third of its learning rate)
-    # and 30 (27 with another seed)
+    # shipped agndc_fast continued), 23 (22 with thin struts added) and 30 (stage 27, in
+    # concluded, with another seed)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -162,18 +162,6 @@ current)
         --data "${data}_distilled,${sheets}_distilled,${struts}_distilled" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
-    # stage 27: stage 25 (the shipped AGNDC on DATA, the sheets and the strut frames) at three
-    # times its learning rate, the same seed and crops: whether the full cascade learns the
-    # bars when it is let move as far as UNDC did
-    stage strut_agndc16_lr15 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
-    # stage 29: stage 27's step 400 (closer than its step 800 on every frame) continued at a
-    # third of its learning rate on the same data (the higher rate, then the lower one, as
-    # stages 5 and 6 made the shipped weights)
-    stage strut_agndc16_lr15_cont --data "$data,$sheets,$struts" \
-        --init "$runs/strut_agndc16_lr15/step-000400.safetensors" --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 18 --steps 800,0,0 --val-steps 400,800
     # stage 30: stage 27 with another seed (other crops): stages 25 and 27 drew the same crops,
     # so whether their step-400 signature (closer centred, farther on shifted grids, softer
     # edges) is the recipe's or those crops'
@@ -183,7 +171,7 @@ current)
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
-    # 8-12, 14, 20, 21, 24-26 and 28, rerun from their own starts
+    # 8-12, 14, 20, 21 and 24-29, rerun from their own starts
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
@@ -244,6 +232,17 @@ concluded)
         --data "${data}_distilled,${sheets}_distilled,${struts}" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
         --steps 2000,0,0 --lr 6.25e-5 --ema 0.99 --seed 27 --val-steps 1000,2000
+    # stage 27: stage 25 (the shipped AGNDC on DATA, the sheets and the strut frames) at three
+    # times its learning rate, the same seed and crops: whether the full cascade learns the
+    # bars when it is let move as far as UNDC did
+    stage strut_agndc16_lr15 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    # stage 29: stage 27's step 400 continued at a third of its learning rate on the same
+    # data: the centred gains given back, the softer edges kept
+    stage strut_agndc16_lr15_cont --data "$data,$sheets,$struts" \
+        --init "$runs/strut_agndc16_lr15/step-000400.safetensors" --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 18 --steps 800,0,0 --val-steps 400,800
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \
