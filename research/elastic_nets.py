@@ -21,22 +21,11 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from agndc_core.grid import LATTICE_PAD
+from agndc_core.grid import LATTICE_PAD, lattice_to_world
 from agndc_core.gridio import load_mesh
 from agndc_core.metrics import evaluate
 from agndc_core.pipeline import remesh
 from agndc_core.voxelize import voxelize
-
-
-def to_lattice(world_vx3: np.ndarray, affine: np.ndarray) -> np.ndarray:
-    """The inverse of ``grid.lattice_to_world``: world -> padded-lattice coordinates."""
-    affine = np.asarray(affine, dtype=np.float64)
-    return (world_vx3 - affine[:3, 3]) @ np.linalg.inv(affine[:3, :3]).T + LATTICE_PAD
-
-
-def to_world(lattice_vx3: np.ndarray, affine: np.ndarray) -> np.ndarray:
-    affine = np.asarray(affine, dtype=np.float64)
-    return (lattice_vx3 - LATTICE_PAD) @ affine[:3, :3].T + affine[:3, 3]
 
 
 def relax(vertices_vx3: np.ndarray, faces_fx3: np.ndarray, cells_vx3: np.ndarray, passes: int,
@@ -70,16 +59,17 @@ def main() -> None:
     for entry in manifest:
         vertices, faces = load_mesh(args.folder / entry["file"])
         grid = voxelize(vertices, faces, args.res)
-        nets = remesh(grid, method="surfacenets", reframe=False)
-        lattice = to_lattice(nets.vertices, grid.affine)
+        # grid alone: not the voxelised mesh's bounding box, which the grid does not hold
+        nets = remesh(grid, method="surfacenets", reframe=False, source_bounds=False)
+        lattice = grid.world_to_index(nets.vertices) + LATTICE_PAD  # lattice_to_world inverted
         # surface nets vertices lie inside their cells (a face's offset can be exactly 0)
         cells = np.floor(lattice + 1e-6)
-        marching = remesh(grid, method="mc", reframe=False)
+        marching = remesh(grid, method="mc", reframe=False, source_bounds=False)
         candidates = {"mc": (marching.vertices, marching.faces),
                       "surfacenets": (nets.vertices, nets.faces)}
         for k in passes:
             relaxed = relax(lattice, nets.faces, cells, k, args.step)
-            candidates[f"elastic{k}"] = (to_world(relaxed, grid.affine), nets.faces)
+            candidates[f"elastic{k}"] = (lattice_to_world(relaxed, grid.affine), nets.faces)
         for method, (v, f) in candidates.items():
             m = evaluate(v, f, vertices, faces, n_samples=args.samples)
             rows.append({"name": Path(entry["file"]).stem, "kind": entry["kind"],
