@@ -27,7 +27,8 @@
 # of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
 # like the rest; docs/experiments/thin-struts.md). Stage 30: stage 27 (in concluded: stage 25,
 # the shipped AGNDC on DATA, the sheets and the frames, at three times its learning rate) with
-# another seed. A stage is kept short (80-120 min where a step takes
+# another seed. Stage 31: stage 27 with crease and corner cells weighted 5x in the vertex
+# loss (--crease-weight 4). A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -121,8 +122,8 @@ current)
     # on them: 16 and 17 (the layered recipe with two seeds; their steps 400 are also averaged,
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
-    # shipped agndc_fast continued), 23 (22 with thin struts added) and 30 (stage 27, in
-    # concluded, with another seed)
+    # shipped agndc_fast continued), 23 (22 with thin struts added), 30 (stage 27, in
+    # concluded, with another seed) and 31 (stage 27 with creases weighted in the loss)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -168,6 +169,11 @@ current)
     stage strut_agndc16_lr15_seed19 --data "$data,$sheets,$struts" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 1.5e-4 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
+    # stage 31: stage 27 (same seed and crops) with crease and corner cells weighted 5x in the
+    # vertex loss (--crease-weight 4): whether the softer edges of its step 400 are the loss's
+    stage strut_agndc16_lr15_crease4 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):

@@ -94,6 +94,9 @@ def add_train_parser(sub) -> None:
     p.add_argument("--quadric-floor", type=float, default=None, help="weight of the plain "
                    "squared vertex error beside the normal quadric (default 0.1; 1 pins "
                    "vertices to their labels like MSE)")
+    p.add_argument("--crease-weight", type=float, default=0.0, help="extra weight of crease "
+                   "and corner cells in the vertex loss: such a cell counts 1 + this (default "
+                   "0: every surface cell alike)")
     p.add_argument("--ema", type=float, default=0.0, help="decay of a moving average of the "
                    "weights that validation scores and the checkpoint keeps, e.g. 0.99 "
                    "(default 0: off)")
@@ -178,7 +181,8 @@ def _cmd_train(args) -> int:
                       init_matching=args.init_matching, val_steps=_ints(args.val_steps),
                       max_seconds=args.max_minutes * 60 if args.max_minutes else None,
                       ema=args.ema, outside_crops=args.outside_crops,
-                      random_phase=args.random_phase, binary_targets=args.binary_targets)
+                      random_phase=args.random_phase, binary_targets=args.binary_targets,
+                      crease_weight=args.crease_weight)
     if args.quadric_floor is not None:
         cfg.quadric_floor = args.quadric_floor
     path = train(cfg, resume=args.resume)

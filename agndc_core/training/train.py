@@ -89,6 +89,9 @@ class TrainConfig:
     # weight of the plain squared vertex error beside the normal quadric (nn.loss): small lets a
     # vertex slide along its face, 1 pins it to the labelled (QEF) vertex as plain MSE does
     quadric_floor: float = QUADRIC_FLOOR
+    # extra weight of crease and corner cells in the vertex loss (nn.loss: a cell whose normal
+    # quadric has two strong directions counts 1 + crease_weight); 0 = every surface cell alike
+    crease_weight: float = 0.0
     # exponential moving average of the trained scale's weights (decay per step; 0 = off). A
     # batch of 4 crops makes every step noisy; the average is what validation scores and what
     # the checkpoint keeps, and it is committed to the scale before finer scales train on it
@@ -135,7 +138,8 @@ class Trainer:
         # the finest scale's edges are the input's crossing parity (inference always contours
         # the input's topology): no edge loss there, its gradient would train a dead head
         self.losses = torch.nn.ModuleList([
-            AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor)
+            AGNDCLoss(train_edges=s != 0, quadric_floor=cfg.quadric_floor,
+                      crease_weight=cfg.crease_weight)
             for s in range(levels + 1)]).to(self.device)
         # what an --init-matching warm start loaded (None: a whole checkpoint, or none)
         self.warm_start: dict | None = None
@@ -541,7 +545,7 @@ def _load_matching(model: torch.nn.Module, source: dict) -> dict:
 
 #: the options a lineage entry keeps of each run (the rest are in that run's own record)
 LINEAGE_OPTIONS = ("init", "batch", "lr", "seed", "crop", "margin", "quadric_floor",
-                   "ema", "outside_crops", "random_phase", "binary_targets")
+                   "crease_weight", "ema", "outside_crops", "random_phase", "binary_targets")
 
 
 def _lineage_entry(training: dict, run) -> dict:

@@ -126,6 +126,33 @@ def test_quadric_floor_adds_the_plain_squared_error():
         AGNDCLoss(quadric_floor=-1.0)
 
 
+def test_crease_weight_weights_crease_cells_in_the_vertex_mean():
+    """With crease weight c, a cell whose quadric holds two faces counts 1 + c min(1, I2 / 0.1)
+    in the mean of the vertex loss; flat cells count 1; c = 0 is the plain mean."""
+    pred = torch.zeros(1, 6, 2, 1, 1)
+    vertex = torch.zeros(1, 2, 1, 1, 3)
+    vertex[0, 0, 0, 0, 0] = 0.3  # flat cell: error 0.3 across its face (normal x)
+    vertex[0, 1, 0, 0, 0] = 0.5  # crease cell: error 0.5 along x, one of its two normals
+    surface = torch.ones(1, 2, 1, 1, dtype=torch.bool)
+    edge = torch.zeros(1, 2, 1, 1, 3)
+    quadric = torch.zeros(1, 2, 1, 1, 6)
+    quadric[0, 0, 0, 0, 0] = 1.0                       # Q = x x^T, I2 = 0
+    quadric[0, 1, 0, 0, 0] = quadric[0, 1, 0, 0, 1] = 0.5  # Q = (x x^T + y y^T) / 2, I2 = 0.25
+    flat, crease = 0.09, 0.5 * 0.25  # d^T Q d of each cell (floor 0)
+    for c in (0.0, 1.0, 4.0):
+        loss = AGNDCLoss(train_edges=False, quadric_floor=0.0, crease_weight=c)
+        value, _ = loss(pred, vertex, edge, surface, quadric=quadric)
+        assert float(value) == pytest.approx((flat + (1 + c) * crease) / (2 + c))
+    # a weak crease (I2 below the full-crease level) is weighted in proportion
+    quadric[0, 1, 0, 0, 0], quadric[0, 1, 0, 0, 1] = 0.95, 0.05  # I2 = 0.0475
+    weight = 1 + 2.0 * 0.0475 / 0.1
+    value, _ = AGNDCLoss(train_edges=False, quadric_floor=0.0, crease_weight=2.0)(
+        pred, vertex, edge, surface, quadric=quadric)
+    assert float(value) == pytest.approx((flat + weight * 0.95 * 0.25) / (1 + weight))
+    with pytest.raises(ModelError, match="crease_weight"):
+        AGNDCLoss(crease_weight=-1.0)
+
+
 # ---------------------------------------------------------------------- band evaluation
 
 

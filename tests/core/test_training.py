@@ -257,6 +257,17 @@ def test_quadric_floor_reaches_every_scale_loss(data_dir, tmp_path):
     assert Trainer(_config(data_dir, tmp_path / "default")).losses[0].quadric_floor == 0.1
 
 
+def test_crease_weight_reaches_every_scale_loss_and_the_lineage(data_dir, tmp_path):
+    """--crease-weight is what every scale's loss weights creases by (default 0: off), and a
+    lineage entry records it with the other loss options."""
+    from agndc_core.training.train import LINEAGE_OPTIONS
+    cfg = _config(data_dir, tmp_path / "run")
+    cfg.crease_weight = 3.0
+    assert [loss.crease_weight for loss in Trainer(cfg).losses] == [3.0] * 3
+    assert Trainer(_config(data_dir, tmp_path / "default")).losses[0].crease_weight == 0.0
+    assert "crease_weight" in LINEAGE_OPTIONS
+
+
 @pytest.mark.slow
 def test_short_run_improves_on_surface_nets_and_writes_checkpoint(data_dir, tmp_path):
     """An untrained network *is* surface nets (zero vertex heads + prior); a short run must do
