@@ -28,7 +28,8 @@
 # like the rest; docs/experiments/thin-struts.md). Stage 30: stage 27 (in concluded: stage 25,
 # the shipped AGNDC on DATA, the sheets and the frames, at three times its learning rate) with
 # another seed. Stage 31: stage 27 with crease and corner cells weighted 5x in the vertex
-# loss (--crease-weight 4). A stage is kept short (80-120 min where a step takes
+# loss (--crease-weight 4); stage 32 the same with stage 30's seed; stage 33 stage 16 (no frames) with it.
+# A stage is kept short (80-120 min where a step takes
 # ~6 s).
 #
 # concluded: the stages of the current lineage whose verdict is in, none of which beat the
@@ -123,7 +124,8 @@ current)
     # docs/experiments/layered-parts.md), then 13 (whose final student stage 15 continues), 15
     # and 19 (which continues 15; its step 2,000 is the shipped agndc_fast), then 22 (the
     # shipped agndc_fast continued), 23 (22 with thin struts added), 30 (stage 27, in
-    # concluded, with another seed) and 31 (stage 27 with creases weighted in the loss)
+    # concluded, with another seed), 31 (stage 27 with creases weighted in the loss), 32 (31
+    # with another seed) and 33 (16 with the crease weight)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
@@ -174,6 +176,16 @@ current)
     stage strut_agndc16_lr15_crease4 --data "$data,$sheets,$struts" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
+    # stage 32: stage 31 with another seed (stage 30's crops): whether the crease weight's gain
+    # on the family's centred and shifted grids is the loss's or stage 27's crops'
+    stage strut_agndc16_lr15_crease4_seed19 --data "$data,$sheets,$struts" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 1.5e-4 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
+    # stage 33: stage 16 (the layered parts, no frames: the frames cost the sheets in stages 25,
+    # 27, 30 and 31) with the crease weight of stage 31
+    stage layer_agndc16_crease4 --data "$data,$sheets,$layered" \
+        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
