@@ -8,53 +8,56 @@
 # Only a stage's run folder carries its state: a new machine starts a stage again from its
 # start and, the stage being seeded, draws the same crops (the weights come out close, not bit
 # for bit, on another CPU). So
-# `current` (the default) holds only the stages whose verdict is open, and a machine that has
-# only the repository starts on them. Stage 16: stage 10's recipe (the shipped weights continued
-# on DATA and the 200 thin sheets at 5e-5, EMA 0.995) with 300 layered parts added (DATA_layered,
+# `current` (the default) holds only the stages whose verdict is open, and a machine that has only
+# the repository starts on them. Stage 16: stage 10's recipe (the shipped weights continued on
+# DATA and the 200 thin sheets at 5e-5, EMA 0.995) with 300 layered parts added (DATA_layered,
 # agndc train-data --layered 1.0: caps, lids and stepped plates whose layers are about a voxel
 # thick, the dev mesh abc8's pattern), checkpoints at 400 and 800; its step 400 beat the shipped
 # weights on the centred sheets and family, level on their shifted grids. Stage 17: stage 16 with
 # another seed (19): its step 400 does not repeat the family's gain, and the two steps 400
-# averaged weight by weight score the mean of the two (docs/experiments/layered-parts.md). Stage 13: agndc_fast distilled again from the shipped
-# AGNDC: the teacher's vertices on DATA and the sheets (agndc distil-data), then the student's
-# recipe (docs/training.md, "agndc_fast, distilled"), checkpoints at 1,000, 2,000 and 3,000
-# finest-scale steps. Stage 15: stage 13's final student continued 3,000 steps on the same data
-# at half the learning rate: ahead of the shipped agndc_fast on the validation family, behind on
-# the centred thin sheets (docs/experiments/student.md). Stage 19: stage 15's final student
-# continued 3,000 steps at half its learning rate again; its step 2,000 is the shipped
-# agndc_fast (agndc_student.safetensors). Stage 22: the shipped agndc_fast continued 2,000 steps
-# on the teacher's targets at half stage 19's learning rate. Stage 23: stage 22 with 300 frames
-# of thin struts added (DATA_struts, agndc train-data --struts 1.0, distilled by the teacher
-# like the rest; docs/experiments/thin-struts.md). Stage 30: stage 27 (in concluded: stage 25,
-# the shipped AGNDC on DATA, the sheets and the frames, at three times its learning rate) with
-# another seed. Stage 34: stage 16 with a third seed. A stage is kept short (80-120 min where
-# a step takes ~6 s).
+# averaged weight by weight score the mean of the two (docs/experiments/layered-parts.md). Stage
+# 13: agndc_fast distilled again from the shipped AGNDC: the teacher's vertices on DATA and the
+# sheets (agndc distil-data), then the student's recipe (docs/training.md, "agndc_fast,
+# distilled"), checkpoints at 1,000, 2,000 and 3,000 finest-scale steps. Stage 15: stage 13's
+# final student continued 3,000 steps on the same data at half the learning rate: ahead of the
+# shipped agndc_fast on the validation family, behind on the centred thin sheets
+# (docs/experiments/student.md). Stage 19: stage 15's final student continued 3,000 steps at half
+# its learning rate again; its step 2,000 is the shipped agndc_fast (agndc_student.safetensors).
+# Stage 22: the shipped agndc_fast continued 2,000 steps on the teacher's targets at half stage
+# 19's learning rate. Stage 23: stage 22 with 300 frames of thin struts added (DATA_struts, agndc
+# train-data --struts 1.0, distilled by the teacher like the rest;
+# docs/experiments/thin-struts.md). Stage 34: stage 16 with a third seed. A stage is kept short
+# (80-120 min where a step takes ~6 s).
 #
-# concluded: the stages of the current lineage whose verdict is in, none of which beat the
-# shipped weights on the validation family. Stage 8: the shipped weights continued 800 steps on
-# DATA, the thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned ones are
-# turned 1-15 degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at 1e-4 and
-# EMA 0.99. Stage 9: stage 8's final weights continued 800 steps at half its learning rate and
-# EMA 0.995 (docs/experiments/sheet-training.md). Stage 10: the shipped weights continued on
-# their own recipe with a new seed (it wanders about the shipped weights). Stage 11: the same
-# with 900 new training shapes (DATA_fresh, seeds from 40,000) in place of DATA. Stage 12: the
-# shipped weights on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with
-# 300 shapes that grow sharp spikes added (DATA_spikes; docs/experiments/spikes.md). Stage 20:
-# the shipped UNDC (stage 18) continued 3,000 steps on the same data at half its learning rate
-# (closer on the family, farther on the thin sheets: docs/training.md). Stage 21: the shipped
-# agndc_fast continued on the true targets (not the teacher's) of DATA, the sheets and the
-# layered parts at stage 19's learning rate, stopped after step 2,000: farther on the family
-# and the thin sheets (docs/experiments/student.md). Stage 24: stage 20 with the strut frames
-# added on their true targets: closer on the thin-strut validation family than stage 20 (29 of
-# 36 shapes), level on the family, farther on the thin sheets. Stage 25: the shipped AGNDC
-# continued on DATA, the sheets and the strut frames (stage 14's recipe): its step 400 closer on
-# the centred frames, not on shifted grids; its step 800 level on the family, farther on the
-# sheets (docs/experiments/thin-struts.md). Stage 26: stage 24 with the thin sheets in its data
-# too: level on the family, closer on the struts, farther on the sheets than the shipped UNDC.
-# Stage 28: stage 23 with the frames on their true targets: the student closer on the struts,
-# farther on the thin sheets. Stage 27: stage 25 at three times its learning rate: its step 400
-# closer centred and at 128^3 and on the sheets, farther on shifted grids, softer edges. Stage
-# 29: that step 400 continued at 5e-5: the centred gains given back.
+# concluded: the stages of the current lineage whose verdict is in, none of which beat the shipped
+# weights on the validation family. Stage 8: the shipped weights continued 800 steps on DATA, the
+# thin sheets, the wrinkled shapes and 900 shapes of which the grid-aligned ones are turned 1-15
+# degrees off the axes (DATA_tilted, agndc train-data --tilted 1.0), at 1e-4 and EMA 0.99. Stage
+# 9: stage 8's final weights continued 800 steps at half its learning rate and EMA 0.995
+# (docs/experiments/sheet-training.md). Stage 10: the shipped weights continued on their own
+# recipe with a new seed (it wanders about the shipped weights). Stage 11: the same with 900 new
+# training shapes (DATA_fresh, seeds from 40,000) in place of DATA. Stage 12: the shipped weights
+# on all 2,000 shapes at 3e-5, 1,200 steps. Stage 14: stage 10's recipe with 300 shapes that grow
+# sharp spikes added (DATA_spikes; docs/experiments/spikes.md). Stage 20: the shipped UNDC (stage
+# 18) continued 3,000 steps on the same data at half its learning rate (closer on the family,
+# farther on the thin sheets: docs/training.md). Stage 21: the shipped agndc_fast continued on the
+# true targets (not the teacher's) of DATA, the sheets and the layered parts at stage 19's
+# learning rate, stopped after step 2,000: farther on the family and the thin sheets
+# (docs/experiments/student.md). Stage 24: stage 20 with the strut frames added on their true
+# targets: closer on the thin-strut validation family than stage 20 (29 of 36 shapes), level on
+# the family, farther on the thin sheets. Stage 25: the shipped AGNDC continued on DATA, the
+# sheets and the strut frames (stage 14's recipe): its step 400 closer on the centred frames, not
+# on shifted grids; its step 800 level on the family, farther on the sheets
+# (docs/experiments/thin-struts.md). Stage 26: stage 24 with the thin sheets in its data too:
+# level on the family, closer on the struts, farther on the sheets than the shipped UNDC. Stage
+# 28: stage 23 with the frames on their true targets: the student closer on the struts, farther on
+# the thin sheets. Stage 27: stage 25 at three times its learning rate: its step 400 closer
+# centred and at 128^3 and on the sheets, farther on shifted grids, softer edges. Stage 29: that
+# step 400 continued at 5e-5: the centred gains given back. Stage 30: stage 27 with another seed:
+# the shifted grids' loss and the softer edges repeat, the centred and sheet gains do not. Stages
+# 31-33: the crease-weighted vertex loss (--crease-weight 4) on stage 27, on stage 30's seed and
+# on stage 16: the shifted grids a little closer, the thin sheets farther in all three
+# (docs/experiments/thin-struts.md).
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their
 # own starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps
@@ -110,6 +113,13 @@ stage() {  # stage NAME ARGS...: run or resume one stage; skip it once final.saf
     .venv/bin/agndc train -o "$runs/$name" "${common[@]}" "$@" "${resume[@]}"
 }
 
+continue_shipped() {  # continue_shipped NAME DATA ARGS...: the shipped AGNDC continued 800
+    # steps on DATA (comma-separated folders), checkpoints at 400 and 800; ARGS give the rest
+    local name=$1 folders=$2; shift 2
+    stage "$name" --data "$folders" --init agndc_core/weights/agndc.safetensors \
+        --model "$shipped_config" --steps 800,0,0 --val-steps 400,800 "$@"
+}
+
 generate "$data" -n 900
 sheets="${data}_sheets"
 wrinkled="${data}_wrinkled"
@@ -127,13 +137,10 @@ current)
     layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
     # stage 16: stage 10's recipe with 300 layered parts added (train-data --layered 1.0)
-    stage layer_agndc16 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped layer_agndc16 "$data,$sheets,$layered" --lr 5e-5 --ema 0.995 --seed 17
     # stage 17: stage 16 again with another seed, whether its gain holds
-    stage layer_agndc16_seed19 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
+    continue_shipped layer_agndc16_seed19 "$data,$sheets,$layered" \
+        --lr 5e-5 --ema 0.995 --seed 19
     # stage 13: agndc_fast distilled again from the shipped AGNDC
     distil "$data" "${data}_distilled"
     distil "$sheets" "${sheets}_distilled"
@@ -165,9 +172,8 @@ current)
     # stage 34: stage 16 with a third seed (23): stage 16's step 400 is ahead of the shipped
     # weights on the centred family, both sheet sets and 128^3 and level on the shifted grids;
     # stage 17 (seed 19) did not repeat it on the family
-    stage layer_agndc16_seed23 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 23 --steps 800,0,0 --val-steps 400,800
+    continue_shipped layer_agndc16_seed23 "$data,$sheets,$layered" \
+        --lr 5e-5 --ema 0.995 --seed 23
     ;;
 concluded)
     # the stages of the current lineage whose verdict is in (none beat the shipped weights):
@@ -175,28 +181,21 @@ concluded)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$wrinkled" -n 900 --seed0 10000 --wrinkled 0.5
     generate "$tilted" -n 900 --seed0 30000 --tilted 1.0
-    stage tilt_agndc16 --data "$data,$sheets,$wrinkled,$tilted" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1e-4 --ema 0.99 --seed 15 --steps 800,0,0 --val-steps 400,800
+    continue_shipped tilt_agndc16 "$data,$sheets,$wrinkled,$tilted" \
+        --lr 1e-4 --ema 0.99 --seed 15
     stage tilt_agndc16_cont --data "$data,$sheets,$wrinkled,$tilted" \
         --init "$runs/tilt_agndc16/final.safetensors" --model "$shipped_config" \
         --lr 5e-5 --ema 0.995 --seed 16 --steps 800,0,0 --val-steps 400,800
-    stage ship_agndc16_seed17 --data "$data,$sheets" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped ship_agndc16_seed17 "$data,$sheets" --lr 5e-5 --ema 0.995 --seed 17
     fresh="${data}_fresh"
     generate "$fresh" -n 900 --seed0 40000
-    stage fresh_agndc16 --data "$fresh,$sheets" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped fresh_agndc16 "$fresh,$sheets" --lr 5e-5 --ema 0.995 --seed 17
     stage all_agndc16 --data "$data,$fresh,$sheets" \
         --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
         --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
     spikes="${data}_spikes"
     generate "$spikes" -n 300 --seed0 50000 --spikes 1.0
-    stage spike_agndc16 --data "$data,$sheets,$spikes" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped spike_agndc16 "$data,$sheets,$spikes" --lr 5e-5 --ema 0.995 --seed 17
     # stage 20: the shipped UNDC (stage 18) continued on its data at half its learning rate
     stage undc_wrinkled16_cont --undc --model '{"width": 16}' --data "$data,$wrinkled" \
         --init agndc_core/weights/undc.safetensors --lr 2.5e-4 --ema 0.995 --seed 25 \
@@ -214,9 +213,7 @@ concluded)
         --steps 3000 --val-steps 1000,2000,3000
     # stage 25: the shipped AGNDC (the students' teacher) continued on DATA, the sheets and
     # the strut frames, stage 14's recipe with the frames in place of the spiky shapes
-    stage strut_agndc16 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped strut_agndc16 "$data,$sheets,$struts" --lr 5e-5 --ema 0.995 --seed 17
     # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's
     # (its verdict read at steps 1,000 and 2,000, where it was stopped)
     layered="${data}_layered"
@@ -235,9 +232,8 @@ concluded)
     # stage 27: stage 25 (the shipped AGNDC on DATA, the sheets and the strut frames) at three
     # times its learning rate, the same seed and crops: whether the full cascade learns the
     # bars when it is let move as far as UNDC did
-    stage strut_agndc16_lr15 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800
+    continue_shipped strut_agndc16_lr15 "$data,$sheets,$struts" \
+        --lr 1.5e-4 --ema 0.995 --seed 17
     # stage 29: stage 27's step 400 continued at a third of its learning rate on the same
     # data: the centred gains given back, the softer edges kept
     stage strut_agndc16_lr15_cont --data "$data,$sheets,$struts" \
@@ -245,22 +241,18 @@ concluded)
         --lr 5e-5 --ema 0.995 --seed 18 --steps 800,0,0 --val-steps 400,800
     # stage 30: stage 27 with another seed: the shifted grids' loss and the softer edges come
     # back, the centred and sheet gains do not (they were stage 27's crops')
-    stage strut_agndc16_lr15_seed19 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1.5e-4 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800
+    continue_shipped strut_agndc16_lr15_seed19 "$data,$sheets,$struts" \
+        --lr 1.5e-4 --ema 0.995 --seed 19
     # stage 31: stage 27 (same seed and crops) with crease and corner cells weighted 5x in the
     # vertex loss (--crease-weight 4); stage 32 the same with stage 30's seed; stage 33 stage 16
     # with it. The weight costs the thin sheets 0.15-0.33 against the same crops without it
     # (docs/experiments/thin-struts.md); stages 32 and 33 were judged at their step 400
-    stage strut_agndc16_lr15_crease4 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1.5e-4 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
-    stage strut_agndc16_lr15_crease4_seed19 --data "$data,$sheets,$struts" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 1.5e-4 --ema 0.995 --seed 19 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
-    stage layer_agndc16_crease4 --data "$data,$sheets,$layered" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
-        --lr 5e-5 --ema 0.995 --seed 17 --steps 800,0,0 --val-steps 400,800 --crease-weight 4
+    continue_shipped strut_agndc16_lr15_crease4 "$data,$sheets,$struts" \
+        --lr 1.5e-4 --ema 0.995 --seed 17 --crease-weight 4
+    continue_shipped strut_agndc16_lr15_crease4_seed19 "$data,$sheets,$struts" \
+        --lr 1.5e-4 --ema 0.995 --seed 19 --crease-weight 4
+    continue_shipped layer_agndc16_crease4 "$data,$sheets,$layered" \
+        --lr 5e-5 --ema 0.995 --seed 17 --crease-weight 4
     ;;
 history)
     stage bt_agndc16_long --lr 1e-3 --seed 5 --steps 3000,100,100 --binary-targets \

@@ -3,18 +3,19 @@
 # spikes and the layered caps, on the frames a shipping decision needs (docs/training.md,
 # "Evaluating"), and compare it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/ and caps/ (made by `bash
-# research/score_validation.sh VAL data`: agndc val-data, 48 shapes, 24 sheets, 48 more sheets
-# from their own seeds (the sheets are the noisiest frame), 36 thin-strut shapes;
+# VAL holds family/, family_b/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/ and caps/
+# (made by `bash research/score_validation.sh VAL data`: agndc val-data, 48 shapes, 48 more from
+# their own seeds (a second family, to check a choice made on the first), 24 sheets, 48 more
+# sheets from their own seeds (the sheets are the noisiest frame), 36 thin-strut shapes;
 # research/spike_rows.py, 12 rows of cones 2-6 and 12 of cones 0.8-2 voxels in radius at the
 # base; research/layered_caps.py, 24 caps of layers about a voxel thick; ~1 min). NAME without
 # a CHECKPOINT scores the shipped weights, together with marching cubes and oracle_binary (the
 # reference; run it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s
-# sheets_b": 64 / 128 the family centred, 64s / 128s on 3 shifted grids per shape, sheets /
-# sheets_s the sheets at 64^3, sheets_b the second set of sheets, struts the thin struts,
-# spikes / spikes_thin the rows of cones at 64^3, caps the layered caps at 64^3. A
-# finished frame is skipped. Results:
-# OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
+# sheets_b": 64 / 128 the family centred, 64s / 128s on 3 shifted grids per shape, 64b the
+# second family centred, sheets / sheets_s the sheets at 64^3, sheets_b the second set of
+# sheets, struts the thin struts, spikes / spikes_thin the rows of cones at 64^3, caps the
+# layered caps at 64^3. A finished frame is skipped. Results: OUT/NAME/FRAME/rows.csv, then
+# the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -22,6 +23,8 @@ val=$1
 agndc=.venv/bin/agndc
 if [[ ${2:-} == data ]]; then  # the validation data, once
     [[ -f $val/family/MANIFEST.csv ]] || $agndc val-data -o "$val/family" -n 48
+    [[ -f $val/family_b/MANIFEST.csv ]] || $agndc val-data -o "$val/family_b" -n 48 \
+        --seed0 2000100
     [[ -f $val/sheets/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets" -n 24
     [[ -f $val/sheets_b/MANIFEST.csv ]] || $agndc val-data --sheets -o "$val/sheets_b" \
         --seed0 3000100 -n 48
@@ -48,6 +51,7 @@ for frame in $frames; do
         64s) args=("$val/family" --res 64 --shifts 3) ;;
         128) args=("$val/family" --res 128) ;;
         128s) args=("$val/family" --res 128 --shifts 3) ;;
+        64b) args=("$val/family_b" --res 64) ;;
         sheets) args=("$val/sheets" --res 64) ;;
         sheets_s) args=("$val/sheets" --res 64 --shifts 3) ;;
         sheets_b) args=("$val/sheets_b" --res 64) ;;
@@ -55,7 +59,7 @@ for frame in $frames; do
         spikes) args=("$val/spikes" --res 64) ;;
         spikes_thin) args=("$val/spikes_thin" --res 64) ;;
         caps) args=("$val/caps" --res 64) ;;
-        *) echo "unknown frame '$frame' (64 64s 128 128s sheets sheets_s sheets_b struts" \
+        *) echo "unknown frame '$frame' (64 64s 128 128s 64b sheets sheets_s sheets_b struts" \
                 "spikes spikes_thin caps)" >&2
            exit 2 ;;
     esac
