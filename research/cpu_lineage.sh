@@ -55,8 +55,8 @@
 # (docs/experiments/thin-struts.md). Stage 17: stage 16 with another seed (19): its step 400 does
 # not repeat stage 16's gain on the family, and the two steps 400 averaged weight by weight score
 # the mean of the two (docs/experiments/layered-parts.md). Stage 34: stage 16 with a third seed
-# (23): the sheets' gain repeats, the family's does not. Stages 8-17 and 24-34 start from the
-# AGNDC of stage 6 (agndc_v6 below).
+# (23): the sheets' gain repeats, the family's does not. Their AGNDC stages start from the AGNDC
+# of stage 6 (agndc_v6 below) or from a continuation of it.
 #
 # history: the stages behind the shipped weights and the studies beside them, rerun from their own
 # starts. Stage 1: AGNDC w16 from scratch with --binary-targets, 3,000 finest-scale steps (+100,
@@ -124,9 +124,9 @@ continue_agndc() {  # continue_agndc WEIGHTS NAME DATA ARGS...: an AGNDC checkpo
         --steps 800,0,0 --val-steps 400,800 "$@"
 }
 
-# The AGNDC shipped before stage 16's step 400 (stage 6's step 2,000, sha256 fa79765a...): the
-# start of stages 8-17 and 24-34 and the teacher of the distilled students, read from the last
-# commit that shipped it.
+# The AGNDC shipped before stage 16's step 400 (stage 6's step 2,000, sha256 fa79765a...): where
+# the AGNDC stages of `concluded` and stage 16 start, and the teacher of the distilled students;
+# read from the last commit that shipped it.
 agndc_v6=$runs/agndc_v6.safetensors
 if [[ ! -f $agndc_v6 ]]; then
     mkdir -p "$runs"
@@ -202,7 +202,7 @@ concluded)
     generate "$fresh" -n 900 --seed0 40000
     continue_agndc "$agndc_v6" fresh_agndc16 "$fresh,$sheets" --lr 5e-5 --ema 0.995 --seed 17
     stage all_agndc16 --data "$data,$fresh,$sheets" \
-        --init agndc_core/weights/agndc.safetensors --model "$shipped_config" \
+        --init "$agndc_v6" --model "$shipped_config" \
         --lr 3e-5 --ema 0.995 --seed 18 --steps 1200,0,0 --val-steps 400,800,1200
     spikes="${data}_spikes"
     generate "$spikes" -n 300 --seed0 50000 --spikes 1.0
