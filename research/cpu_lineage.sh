@@ -139,6 +139,7 @@ generate "$data" -n 900
 sheets="${data}_sheets"
 wrinkled="${data}_wrinkled"
 tilted="${data}_tilted"
+layered="${data}_layered"
 
 case $which in
 current)
@@ -148,7 +149,6 @@ current)
     # is the shipped agndc_fast), then 22 (the shipped agndc_fast continued) and 23 (22 with
     # thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
-    layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
     # stages 35 and 36: the shipped AGNDC (stage 16's step 400) continued on stage 16's recipe
     # with two seeds, checkpoints at 400 and 800
@@ -229,7 +229,6 @@ concluded)
         --lr 5e-5 --ema 0.995 --seed 17
     # stage 21: the shipped agndc_fast taught by the true targets instead of the teacher's
     # (its verdict read at steps 1,000 and 2,000, where it was stopped)
-    layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
     stage student_true16 --data "$data,$sheets,$layered" \
         --init agndc_core/weights/agndc_student.safetensors --model "$student_config" \
@@ -302,7 +301,6 @@ history)
         --steps 3000 --val-steps 1000,2000,3000
     # stage 16: stage 10's recipe with 300 layered parts added (train-data --layered 1.0); its
     # step 400 is the shipped agndc
-    layered="${data}_layered"
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
     continue_agndc "$agndc_v6" layer_agndc16 "$data,$sheets,$layered" \
         --lr 5e-5 --ema 0.995 --seed 17
