@@ -140,11 +140,13 @@ sheets="${data}_sheets"
 wrinkled="${data}_wrinkled"
 tilted="${data}_tilted"
 layered="${data}_layered"
+rounds="${data}_rounds"
 
 case $which in
 current)
     # the stages whose verdict is open, so that a machine with only the repository starts
-    # on them: 35 and 36 (the shipped AGNDC continued on its own recipe with two seeds), then
+    # on them: 35, 37 and 38 (the shipped AGNDC continued on its own recipe, then with parts of
+    # round features along the axes added, with two seeds), 36 (35's second seed), then
     # 13 (whose final student stage 15 continues), 15 and 19 (which continues 15; its step 2,000
     # is the shipped agndc_fast), then 22 (the shipped agndc_fast continued) and 23 (22 with
     # thin struts added)
@@ -154,6 +156,14 @@ current)
     # with two seeds, checkpoints at 400 and 800
     continue_agndc agndc_core/weights/agndc.safetensors layer_agndc16_v2 \
         "$data,$sheets,$layered" --lr 5e-5 --ema 0.995 --seed 29
+    # stages 37 and 38: stage 35's recipe with 300 parts of round features along the axes
+    # added (train-data --rounds 1.0: pins, bosses, thin-walled tubes, shafts and holes a few
+    # voxels across), seeds 29 and 31
+    generate "$rounds" -n 300 --seed0 80000 --rounds 1.0
+    continue_agndc agndc_core/weights/agndc.safetensors round_agndc16 \
+        "$data,$sheets,$layered,$rounds" --lr 5e-5 --ema 0.995 --seed 29
+    continue_agndc agndc_core/weights/agndc.safetensors round_agndc16_seed31 \
+        "$data,$sheets,$layered,$rounds" --lr 5e-5 --ema 0.995 --seed 31
     continue_agndc agndc_core/weights/agndc.safetensors layer_agndc16_v2_seed31 \
         "$data,$sheets,$layered" --lr 5e-5 --ema 0.995 --seed 31
     # stage 13: agndc_fast distilled again from the AGNDC of stage 6

@@ -2,11 +2,12 @@
 folders, read from the recipes the samples carry (a Markdown table).
 
     .venv/bin/python research/data_mix.py DATA DATA_sheets DATA_wrinkled DATA_tilted DATA_spikes \
-        DATA_layered DATA_struts
+        DATA_layered DATA_struts DATA_rounds
 
-Kinds: the shape family (``shapes.FAMILIES``, ``sheet``, ``layered`` or ``struts``), the
-placement (on the grid axes, turned 1-15° off them by ``--tilted``, or turned by the generator:
-freely, or for a sheet, a layered part or a strut frame 1-10° for two thirds of those), whether
+Kinds: the shape family (``shapes.FAMILIES``, ``sheet``, ``layered``, ``struts`` or ``round``),
+the placement (on the grid axes, turned 1-15° off them by ``--tilted``, or turned by the
+generator: freely, or for a sheet, a layered part, a strut frame or a round part 1-10° for two
+thirds of those), whether
 the surface is wrinkled and whether the shape grew spikes (``--spikes``). A trainer given several
 folders draws every sample alike, so the last row (all folders) is the mix a run sees.
 """
@@ -43,7 +44,7 @@ def kinds(rows: list[dict]) -> dict[str, float]:
     n = len(rows)
     family = Counter(r["family"] for r in rows)
     place = Counter(placement(r) for r in rows)
-    shares = {f: family[f] / n for f in (*FAMILIES, "sheet", "layered", "struts")}
+    shares = {f: family[f] / n for f in (*FAMILIES, "sheet", "layered", "struts", "round")}
     shares.update({p: place[p] / n for p in ("aligned", "tilted", "turned")})
     shares["wrinkled"] = sum("wrinkles" in r for r in rows) / n
     shares["spiky"] = sum(bool(r.get("spikes")) for r in rows) / n

@@ -1,20 +1,21 @@
 #!/usr/bin/env bash
 # Score an AGNDC checkpoint on the generated validation family, the thin sheets, the rows of
-# spikes and the layered caps, on the frames a shipping decision needs (docs/training.md,
+# spikes, the layered caps and the pin plates, on the frames a shipping decision needs (docs/training.md,
 # "Evaluating"), and compare it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/, family_b/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/ and caps/
+# VAL holds family/, family_b/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/, caps/ and pins/
 # (made by `bash research/score_validation.sh VAL data`: agndc val-data, 48 shapes, 48 more from
 # their own seeds (a second family, to check a choice made on the first), 24 sheets, 48 more
 # sheets from their own seeds (the sheets are the noisiest frame), 36 thin-strut shapes;
 # research/spike_rows.py, 12 rows of cones 2-6 and 12 of cones 0.8-2 voxels in radius at the
-# base; research/layered_caps.py, 24 caps of layers about a voxel thick; ~1 min). NAME without
+# base; research/layered_caps.py, 24 caps of layers about a voxel thick; research/axis_pins.py,
+# 24 plates with pins, holes and shafts along the grid axes; ~1 min). NAME without
 # a CHECKPOINT scores the shipped weights, together with marching cubes and oracle_binary (the
 # reference; run it first, as NAME "shipped"). FRAMES, default "64 64s sheets sheets_s
 # sheets_b": 64 / 128 the family centred, 64s / 128s on 3 shifted grids per shape, 64b the
 # second family centred, sheets / sheets_s the sheets at 64^3, sheets_b the second set of
 # sheets, struts the thin struts, spikes / spikes_thin the rows of cones at 64^3, caps the
-# layered caps at 64^3. A finished frame is skipped. Results: OUT/NAME/FRAME/rows.csv, then
+# layered caps at 64^3, pins the pin plates at 64^3. A finished frame is skipped. Results: OUT/NAME/FRAME/rows.csv, then
 # the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
 set -euo pipefail
@@ -35,6 +36,8 @@ if [[ ${2:-} == data ]]; then  # the validation data, once
         -o "$val/spikes_thin" -n 12 --radius 0.8,2
     [[ -f $val/caps/MANIFEST.csv ]] || .venv/bin/python research/layered_caps.py \
         -o "$val/caps" -n 24
+    [[ -f $val/pins/MANIFEST.csv ]] || .venv/bin/python research/axis_pins.py \
+        -o "$val/pins" -n 24
     exit 0
 fi
 out=$2 name=$3
@@ -59,8 +62,9 @@ for frame in $frames; do
         spikes) args=("$val/spikes" --res 64) ;;
         spikes_thin) args=("$val/spikes_thin" --res 64) ;;
         caps) args=("$val/caps" --res 64) ;;
+        pins) args=("$val/pins" --res 64) ;;
         *) echo "unknown frame '$frame' (64 64s 128 128s 64b sheets sheets_s sheets_b struts" \
-                "spikes spikes_thin caps)" >&2
+                "spikes spikes_thin caps pins)" >&2
            exit 2 ;;
     esac
     dest=$out/$name/$frame

@@ -1181,6 +1181,106 @@ def strut_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
     return _to_arrays(strut((-0.5, 0, 0), (0.5, 0, 0), 2 * voxel, 48))
 
 
+# ---------------------------------------------------------------- round parts (training)
+
+#: round parts (``round_shape``): the radius of pins, bosses, holes and shafts, and a tube's
+#: wall, in voxels of the sample's grid (from a pin the grid keeps as a jagged staircase to a
+#: boss whose side is a long run of terraces); a part's base plate, thickness in voxels
+ROUND_RADIUS_VOXELS = (1.5, 12.0)
+ROUND_WALL_VOXELS = (1.2, 4.0)
+ROUND_PLATE_VOXELS = (2.0, 10.0)
+#: the share of round parts whose axes are grid axes (the rest are turned 1-10 degrees off
+#: them or freely, as sheets are)
+ROUND_ALIGNED = 0.75
+#: segments of a round side: facets far finer than a voxel at 128 voxels
+ROUND_SEGMENTS = 96
+
+
+def _round_feature(rng, voxel: float, lo: np.ndarray, hi: np.ndarray) -> tuple[Manifold, bool]:
+    """One round feature on the top or bottom face of the box ``lo``..``hi``, its axis along z
+    (a shaft: along x or y), its centre at a random point: (tool, True to add it, False to cut
+    it). Pins, bosses with a bore, thin-walled tubes and cups, shafts lying on the face, through
+    holes and counterbored holes."""
+    r = rng.uniform(*ROUND_RADIUS_VOXELS) * voxel
+    size = hi - lo
+    x, y = lo[:2] + size[:2] * rng.uniform(0.1, 0.9, 2)
+    up = rng.random() < 0.6
+    face = hi[2] if up else lo[2]
+    height = min(rng.uniform(2.0, 30.0) * voxel, 0.35)
+    kind = int(rng.integers(5))
+    if kind == 3:  # a through hole, counterbored on one side for half of them
+        r = min(r, 0.3 * size[:2].min())
+        hole = Manifold.cylinder(size[2] + 4 * voxel, r, r, ROUND_SEGMENTS).translate(
+            (x, y, lo[2] - 2 * voxel))
+        if rng.random() < 0.5:
+            depth = min(rng.uniform(1.0, 4.0) * voxel, 0.5 * size[2])
+            r2 = r + rng.uniform(1.0, 4.0) * voxel
+            bore = Manifold.cylinder(depth + voxel, r2, r2, ROUND_SEGMENTS).translate(
+                (x, y, face - depth if up else face - voxel))
+            hole = hole + bore
+        return hole, False
+    if kind == 4:  # a shaft lying on the face along x or y
+        length = rng.uniform(0.3, 0.9) * size[:2].max()
+        shaft = Manifold.cylinder(length, r, r, ROUND_SEGMENTS, center=True)
+        shaft = shaft.rotate((0.0, 90.0, 0.0) if rng.random() < 0.5 else (90.0, 0.0, 0.0))
+        sink = rng.uniform(0.2, 0.8) * r  # into the face, so that it joins solidly
+        return shaft.translate((x, y, face + (r - sink if up else sink - r))), True
+    post = Manifold.cylinder(height + voxel, r, r, ROUND_SEGMENTS)
+    if kind == 1:  # a boss: a pin with a bore down its axis
+        bore_r = r - rng.uniform(1.0, 4.0) * voxel
+        if bore_r > voxel:
+            post = post - Manifold.cylinder(height + 3 * voxel, bore_r, bore_r,
+                                            ROUND_SEGMENTS).translate((0, 0, voxel))
+    elif kind == 2:  # a thin-walled tube or cup: a cylinder's wall a few voxels thick
+        r = max(r, 3.0 * voxel)
+        wall = rng.uniform(*ROUND_WALL_VOXELS) * voxel
+        floor = rng.uniform(1.0, 3.0) * voxel if rng.random() < 0.5 else 0.0
+        post = Manifold.cylinder(height + voxel, r, r, ROUND_SEGMENTS) - Manifold.cylinder(
+            height + voxel, r - wall, r - wall, ROUND_SEGMENTS).translate((0, 0, voxel + floor))
+    post = post.translate((x, y, face - voxel))
+    return (post if up else post.mirror((0, 0, 1)).translate((0, 0, 2 * face))), True
+
+
+def round_aligned(seed: int) -> bool:
+    """Whether round part ``seed``'s axes are grid axes (``ROUND_ALIGNED`` of the seeds)."""
+    return bool(np.random.default_rng((seed, 17)).random() < ROUND_ALIGNED)
+
+
+def round_shape(seed: int, voxel: float) -> tuple[np.ndarray, np.ndarray]:
+    """A part of round features along its axes (``voxel`` a fraction of the longest side, which
+    is 1 after normalisation): a plate ``ROUND_PLATE_VOXELS`` thick or a block, carrying 2-8
+    pins, bosses with bores, thin-walled tubes and cups, shafts lying on a face, through holes
+    and counterbores (``_round_feature``), radii ``ROUND_RADIUS_VOXELS``, every centre at a
+    random point of the lattice's period. Along a grid axis a round side reaches the grid as
+    terraces whose steps run parallel to its axis, as a slightly tilted plane's do; the
+    generator's shapes are seldom round along an axis and a few voxels across, where real parts
+    (pins, screws, bosses, tubes) often are. Placement: on the grid axes where
+    ``round_aligned``, otherwise as ``sheet_shape``'s turned parts. Deterministic in (seed, voxel);
+    a plate with one pin if every draw fails."""
+    for attempt in range(MAX_ATTEMPTS):
+        rng = np.random.default_rng((seed, attempt, 17))
+        width = rng.uniform(0.3, 0.8)
+        if rng.random() < 0.6:
+            thickness = rng.uniform(*ROUND_PLATE_VOXELS) * voxel
+        else:
+            thickness = rng.uniform(0.1, 0.35)
+        body = Manifold.cube((1.0, width, thickness), center=True)
+        lo, hi = _bounds(body)
+        tools = [_round_feature(rng, voxel, lo, hi) for _ in range(int(rng.integers(2, 9)))]
+        adds = [tool for tool, add in tools if add]
+        cuts = [tool for tool, add in tools if not add]
+        if adds:
+            body = Manifold.batch_boolean([body, *adds], OpType.Add)
+        m = Manifold.batch_boolean([body, *cuts], OpType.Subtract) if cuts else body
+        if m.is_empty() or m.status().name != "NoError" or m.volume() <= 0:
+            continue
+        placed = _place_flat_part(rng, m, round_aligned(seed))
+        if placed is not None:
+            return placed
+    pin = Manifold.cylinder(0.2, 0.1, 0.1, ROUND_SEGMENTS).translate((0, 0, 2 * voxel))
+    return _to_arrays(Manifold.cube((1.0, 0.5, 4 * voxel), center=True) + pin)
+
+
 def _section_box(section: CrossSection) -> tuple[np.ndarray, np.ndarray]:
     """(2,) min and max corners of a cross-section."""
     box = section.bounds()

@@ -34,6 +34,10 @@ def add_train_parser(sub) -> None:
                    "spiky and layered shapes aside) that are frames of thin struts instead, "
                    "0.7-3 voxels in radius: pavilions on columns, space frames, railings, wire "
                    "rings (default 0)")
+    p.add_argument("--rounds", type=float, default=0.0, help="share of the samples (sheets, "
+                   "spiky, layered and strut shapes aside) that are parts of round features "
+                   "along their axes instead: pins, bosses, thin-walled tubes and cups, shafts, "
+                   "holes and counterbores 1.5-12 voxels in radius (default 0)")
     p.set_defaults(func=_cmd_data)
 
     p = sub.add_parser("val-data", help="generate the validation family (OBJ meshes and "
@@ -134,7 +138,7 @@ def _cmd_data(args) -> int:
     paths = build_dataset(args.out, args.count, seed0=args.seed0, workers=args.workers,
                           resolution_range=bounds, wrinkled=args.wrinkled,
                           sheets=args.sheets, tilted=args.tilted, spikes=args.spikes,
-                          layered=args.layered, struts=args.struts)
+                          layered=args.layered, struts=args.struts, rounds=args.rounds)
     print(f"{len(paths)} samples in {args.out}")
     return 0
 

@@ -23,6 +23,8 @@ from ..study.shapes import (
     generate_shape,
     is_axis_aligned,
     layered_shape,
+    round_aligned,
+    round_shape,
     shape_family,
     sheet_shape,
     small_turn,
@@ -71,7 +73,8 @@ def log_uniform_int(rng, lo: int, hi: int) -> int:
 
 def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=0.0,
                   wrinkled: float = 0.0, sheets: float = 0.0, tilted: float = 0.0,
-                  spikes: float = 0.0, layered: float = 0.0, struts: float = 0.0) -> dict:
+                  spikes: float = 0.0, layered: float = 0.0, struts: float = 0.0,
+                  rounds: float = 0.0) -> dict:
     """The augmentation parameters of sample ``seed`` (deterministic).
 
     ``generate_shape`` already turns all but ``shapes.AXIS_ALIGNED_FRACTION`` of the seeds by a
@@ -94,8 +97,11 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
     stream of its own. ``struts`` is the share of the samples other than sheets, spiky shapes
     and layered parts that become a frame of thin struts instead (``shapes.strut_shape`` at the
     recipe's voxel, family "struts", field ``struts``, no wrinkles, placed by the shape function
-    alone), from a stream of its own. The recipe also records the shape family and whether the
-    sample is grid-aligned.
+    alone), from a stream of its own. ``rounds`` is the share of the samples other than sheets,
+    spiky shapes, layered parts and strut frames that become a part of round features along its
+    axes instead (``shapes.round_shape`` at the recipe's voxel, family "round", field
+    ``rounds``, no wrinkles, placed by the shape function alone), from a stream of its own. The
+    recipe also records the shape family and whether the sample is grid-aligned.
     """
     rng = np.random.default_rng([seed, 1234])
     # every draw is made, used or not, so the later ones do not depend on the branch
@@ -152,6 +158,15 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         recipe.pop("tilt_degrees", None)
         recipe.update(family="struts", rotation=np.eye(3).tolist(),
                       axis_aligned=generator_aligned, struts=True)
+    round_rng = np.random.default_rng([seed, 1234, 17])
+    if (rounds > 0 and round_rng.random() < rounds and "sheet_voxels" not in recipe
+            and not recipe.get("spikes") and "layer_voxels" not in recipe
+            and not recipe.get("struts")):
+        recipe.pop("wrinkles", None)
+        recipe.pop("tilt_degrees", None)
+        # placed by round_shape itself, on the grid axes for most seeds
+        recipe.update(family="round", rotation=np.eye(3).tolist(),
+                      axis_aligned=round_aligned(seed), rounds=True)
     return recipe
 
 
@@ -181,6 +196,8 @@ def recipe_mesh(recipe: dict) -> tuple[np.ndarray, np.ndarray]:
         vertices, faces = spiky_shape(recipe["seed"], voxel)
     elif recipe.get("struts"):
         vertices, faces = strut_shape(recipe["seed"], voxel)
+    elif recipe.get("rounds"):
+        vertices, faces = round_shape(recipe["seed"], voxel)
     elif "layer_voxels" in recipe:
         vertices, faces = layered_shape(recipe["seed"], voxel, recipe["layer_voxels"] * voxel)
     else:
@@ -233,7 +250,8 @@ def _write_one(args) -> str:
 def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=True,
                   resolution_range=RESOLUTION_RANGE, wrinkled: float = 0.0,
                   sheets: float = 0.0, tilted: float = 0.0, spikes: float = 0.0,
-                  layered: float = 0.0, struts: float = 0.0) -> list[Path]:
+                  layered: float = 0.0, struts: float = 0.0,
+                  rounds: float = 0.0) -> list[Path]:
     """Generate ``n`` samples (seeds seed0..seed0+n-1) into ``out_dir``; existing files are kept
     (so a folder holds one resolution range: use a new folder for another).
 
@@ -251,7 +269,7 @@ def build_dataset(out_dir, n: int, seed0: int = 0, workers: int = 2, progress=Tr
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     jobs = [(sample_recipe(seed, (lo, hi), wrinkled=wrinkled, sheets=sheets, tilted=tilted,
-                           spikes=spikes, layered=layered, struts=struts),
+                           spikes=spikes, layered=layered, struts=struts, rounds=rounds),
              out_dir / f"sample_{seed:06d}.npz")
             for seed in range(seed0, seed0 + n)]
     if workers > 1:

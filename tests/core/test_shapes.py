@@ -15,6 +15,8 @@ from agndc_core.study.shapes import (
     generate_shape,
     is_axis_aligned,
     layered_shape,
+    round_aligned,
+    round_shape,
     shape_family,
     sheet_shape,
     spiky_shape,
@@ -382,4 +384,52 @@ def test_strut_recipes_keep_the_other_draws_and_build_frames_of_thin_bars():
         mesh = trimesh.Trimesh(*strut_shape(seed, 1 / 62), process=False)
         assert mesh.is_watertight and mesh.volume > 0, seed
         assert np.ptp(mesh.vertices, axis=0).max() == pytest.approx(1.0, abs=1e-9)
+    assert make_sample(made[0])["lattice"].any()
+
+
+def _round_about_an_axis(vertices, faces) -> float:
+    """The area share of faces whose normal is perpendicular to a grid axis but along none:
+    the sides of cylinders whose axis is a grid axis."""
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    normals = np.abs(mesh.face_normals)
+    side = (normals.min(axis=1) < 1e-6) & (normals.max(axis=1) < 0.99)
+    return float(mesh.area_faces[side].sum() / mesh.area)
+
+
+def test_round_recipes_keep_the_other_draws_and_build_round_features_along_the_axes():
+    seeds = range(300)
+    others = dict(wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.2, struts=0.2)
+    plain = [sample_recipe(s, **others) for s in seeds]
+    rounded = [sample_recipe(s, **others, rounds=0.3) for s in seeds]
+    made = [b for b in rounded if b.get("rounds")]
+    candidates = [a for a in plain if "sheet_voxels" not in a and not a.get("spikes")
+                  and "layer_voxels" not in a and not a.get("struts")]
+    assert len(made) / len(candidates) == pytest.approx(0.3, abs=0.08)
+    placement = ("family", "rotation", "axis_aligned", "tilt_degrees", "rounds")
+    for a, b in zip(plain, rounded):
+        if not b.get("rounds"):
+            assert b == a
+            continue
+        assert b["family"] == "round" and "wrinkles" not in b and "tilt_degrees" not in b
+        assert b["rotation"] == np.eye(3).tolist()
+        assert b["axis_aligned"] == round_aligned(b["seed"])
+        assert {k: v for k, v in b.items() if k not in placement} == {
+            k: v for k, v in a.items() if k not in (*placement, "wrinkles")}
+    aligned = [s for s in range(40) if round_aligned(s)]
+    assert 0.6 < len(aligned) / 40 < 0.9
+    round_share, cad_share = [], []
+    for seed in aligned[:8]:
+        vertices, faces = round_shape(seed, 1 / 62)
+        mesh = trimesh.Trimesh(vertices, faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0, seed
+        assert np.ptp(vertices, axis=0).max() == pytest.approx(1.0, abs=1e-9)
+        round_share.append(_round_about_an_axis(vertices, faces))
+    for seed in [s for s in range(200) if shape_family(s) == "cad" and is_axis_aligned(s)][:8]:
+        cad_share.append(_round_about_an_axis(*generate_shape(seed)))
+    # every aligned round part has round sides about a grid axis, more than the CAD family
+    assert min(round_share) > 0.05 and np.mean(round_share) > 2 * np.mean(cad_share)
+    v, _ = round_shape(made[0]["seed"], 1 / 62)  # deterministic
+    np.testing.assert_array_equal(v, round_shape(made[0]["seed"], 1 / 62)[0])
+    turned = next(s for s in range(40) if not round_aligned(s))
+    assert _round_about_an_axis(*round_shape(turned, 1 / 62)) < 0.05
     assert make_sample(made[0])["lattice"].any()

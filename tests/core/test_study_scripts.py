@@ -115,7 +115,7 @@ def test_a_mirrored_pass_maps_back_onto_the_lattice_cells():
 
 
 def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
-    """data_mix: shares of family (layered parts and strut frames among them), placement,
+    """data_mix: shares of family (layered, strut and round parts among them), placement,
     wrinkles and spikes, read back from sample files."""
     import json
 
@@ -126,7 +126,7 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
 
     mix = research_script("data_mix")
     made = [sample_recipe(s, wrinkled=1.0, sheets=0.25, tilted=1.0, spikes=0.3, layered=0.2,
-                          struts=0.2) for s in range(120)]
+                          struts=0.2, rounds=0.15) for s in range(120)]
     for recipe in made:  # only the recipe: what the script reads
         np.savez(tmp_path / f"sample_{recipe['seed']:06d}.npz", recipe=json.dumps(recipe))
     (tmp_path / "other.npz").touch()  # not a sample
@@ -136,13 +136,15 @@ def test_the_data_mix_counts_each_kind_from_the_samples_recipes(tmp_path):
     sheets = sum(r["family"] == "sheet" for r in made)
     assert shares["sheet"] == pytest.approx(sheets / 120) and 0 < sheets < 60
     assert shares["tilted"] == pytest.approx(sum("tilt_degrees" in r for r in made) / 120)
-    assert shares["tilted"] > 0.15 and shares["wrinkled"] > 0.15
+    assert shares["tilted"] > 0.15 and shares["wrinkled"] > 0.1
     assert shares["spiky"] == pytest.approx(sum(bool(r.get("spikes")) for r in made) / 120)
     assert 0.1 < shares["spiky"] < 0.4
     layered = sum(r["family"] == "layered" for r in made)
     assert shares["layered"] == pytest.approx(layered / 120) and 0 < layered < 60
     struts = sum(r["family"] == "struts" for r in made)
     assert shares["struts"] == pytest.approx(struts / 120) and 0 < struts < 40
+    rounds = sum(r["family"] == "round" for r in made)
+    assert shares["round"] == pytest.approx(rounds / 120) and 0 < rounds < 40
     assert sum(shares[p] for p in ("aligned", "tilted", "turned")) == pytest.approx(1.0)
     families = [f for f in shares
                 if f not in ("aligned", "tilted", "turned", "wrinkled", "spiky")]
