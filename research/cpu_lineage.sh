@@ -11,7 +11,9 @@
 # `current` (the default) holds only the stages whose verdict is open, and a machine that has only
 # the repository starts on them. Stages 35 and 36: the shipped AGNDC (stage 16's step 400)
 # continued on its own recipe (DATA, the thin sheets and the layered parts at 5e-5, EMA 0.995)
-# with two seeds, checkpoints at 400 and 800. Stage 13: agndc_fast distilled again from the AGNDC
+# with two seeds, checkpoints at 400 and 800. Stages 37 and 38: stage 35's recipe with 300 parts
+# of round features along the axes added (DATA_rounds, agndc train-data --rounds 1.0), seeds 29
+# and 31 (docs/experiments/round-parts.md). Stage 13: agndc_fast distilled again from the AGNDC
 # of stage 6 (shipped before stage 16): the teacher's vertices on DATA and the sheets (agndc
 # distil-data), then the student's recipe (docs/training.md, "agndc_fast, distilled"), checkpoints
 # at 1,000, 2,000 and 3,000 finest-scale steps. Stage 15: stage 13's final student continued 3,000
@@ -152,8 +154,8 @@ current)
     # thin struts added)
     generate "$sheets" -n 200 --seed0 20000 --sheets 1.0
     generate "$layered" -n 300 --seed0 60000 --layered 1.0
-    # stages 35 and 36: the shipped AGNDC (stage 16's step 400) continued on stage 16's recipe
-    # with two seeds, checkpoints at 400 and 800
+    # stage 35 (and 36 below): the shipped AGNDC (stage 16's step 400) continued on stage 16's
+    # recipe with two seeds, checkpoints at 400 and 800
     continue_agndc agndc_core/weights/agndc.safetensors layer_agndc16_v2 \
         "$data,$sheets,$layered" --lr 5e-5 --ema 0.995 --seed 29
     # stages 37 and 38: stage 35's recipe with 300 parts of round features along the axes
