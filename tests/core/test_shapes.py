@@ -335,32 +335,40 @@ def _arrays(m):
             np.asarray(mesh.tri_verts).astype(np.int64))
 
 
+def _recipes_of_a_kind(others: dict, field: str, share: float, earlier: tuple) -> list[dict]:
+    """The recipes of seeds 0..299 with ``others`` and ``field=share`` that became the kind
+    (their ``field`` set), checked against the recipes without it: they are ``share`` of the
+    seeds no earlier kind took (recipe keys ``earlier``), every other recipe is unchanged, and
+    a made one keeps its draws but the placement, unwrinkled and unturned (its shape function
+    places it)."""
+    plain = [sample_recipe(s, **others) for s in range(300)]
+    changed = [sample_recipe(s, **others, **{field: share}) for s in range(300)]
+    made = [b for b in changed if b.get(field)]
+    candidates = [a for a in plain if not any(a.get(k) for k in earlier)]
+    assert len(made) / len(candidates) == pytest.approx(share, abs=0.08)
+    placement = ("family", "rotation", "axis_aligned", "tilt_degrees", field)
+    for a, b in zip(plain, changed):
+        if not b.get(field):
+            assert b == a
+            continue
+        assert not any(a.get(k) for k in earlier)
+        assert "wrinkles" not in b and "tilt_degrees" not in b
+        assert b["rotation"] == np.eye(3).tolist()
+        assert {k: v for k, v in b.items() if k not in placement} == {
+            k: v for k, v in a.items() if k not in (*placement, "wrinkles")}
+    return made
+
+
 def test_strut_recipes_keep_the_other_draws_and_build_frames_of_thin_bars():
     from scipy import ndimage
 
     from agndc_core.study.shapes import STRUT_RADIUS_VOXELS
     from agndc_core.voxelize import voxelize
 
-    seeds = range(300)
-    plain = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.2)
-             for s in seeds]
-    framed = [sample_recipe(s, wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.2,
-                            struts=0.3) for s in seeds]
-    made = [b for b in framed if b.get("struts")]
-    candidates = [a for a in plain if "sheet_voxels" not in a and not a.get("spikes")
-                  and "layer_voxels" not in a]
-    assert len(made) / len(candidates) == pytest.approx(0.3, abs=0.08)
-    placement = ("family", "rotation", "axis_aligned", "tilt_degrees", "struts")
-    for a, b in zip(plain, framed):
-        if not b.get("struts"):
-            assert b == a
-            continue
-        assert "sheet_voxels" not in a and not a.get("spikes") and "layer_voxels" not in a
-        assert b["family"] == "struts" and "wrinkles" not in b and "tilt_degrees" not in b
-        assert b["rotation"] == np.eye(3).tolist()
-        assert b["axis_aligned"] == is_axis_aligned(b["seed"])
-        assert {k: v for k, v in b.items() if k not in placement} == {
-            k: v for k, v in a.items() if k not in (*placement, "wrinkles")}
+    others = dict(wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.2)
+    made = _recipes_of_a_kind(others, "struts", 0.3, ("sheet_voxels", "spikes", "layer_voxels"))
+    for b in made:
+        assert b["family"] == "struts" and b["axis_aligned"] == is_axis_aligned(b["seed"])
     # closed, normalised and thin: no point of the grid lies deeper inside than the slabs a
     # pavilion stands on (half of 5 bar radii), where generate_shape's solids go tens of
     # voxels deep
@@ -397,24 +405,11 @@ def _round_about_an_axis(vertices, faces) -> float:
 
 
 def test_round_recipes_keep_the_other_draws_and_build_round_features_along_the_axes():
-    seeds = range(300)
     others = dict(wrinkled=0.5, sheets=0.2, tilted=0.3, spikes=0.2, layered=0.2, struts=0.2)
-    plain = [sample_recipe(s, **others) for s in seeds]
-    rounded = [sample_recipe(s, **others, rounds=0.3) for s in seeds]
-    made = [b for b in rounded if b.get("rounds")]
-    candidates = [a for a in plain if "sheet_voxels" not in a and not a.get("spikes")
-                  and "layer_voxels" not in a and not a.get("struts")]
-    assert len(made) / len(candidates) == pytest.approx(0.3, abs=0.08)
-    placement = ("family", "rotation", "axis_aligned", "tilt_degrees", "rounds")
-    for a, b in zip(plain, rounded):
-        if not b.get("rounds"):
-            assert b == a
-            continue
-        assert b["family"] == "round" and "wrinkles" not in b and "tilt_degrees" not in b
-        assert b["rotation"] == np.eye(3).tolist()
-        assert b["axis_aligned"] == round_aligned(b["seed"])
-        assert {k: v for k, v in b.items() if k not in placement} == {
-            k: v for k, v in a.items() if k not in (*placement, "wrinkles")}
+    made = _recipes_of_a_kind(others, "rounds", 0.3,
+                              ("sheet_voxels", "spikes", "layer_voxels", "struts"))
+    for b in made:
+        assert b["family"] == "round" and b["axis_aligned"] == round_aligned(b["seed"])
     aligned = [s for s in range(40) if round_aligned(s)]
     assert 0.6 < len(aligned) / 40 < 0.9
     round_share, cad_share = [], []
