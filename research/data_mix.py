@@ -7,9 +7,9 @@ folders, read from the recipes the samples carry (a Markdown table).
 Kinds: the shape family (``shapes.FAMILIES``, ``sheet``, ``layered``, ``struts`` or ``round``),
 the placement (on the grid axes, turned 1-15° off them by ``--tilted``, or turned by the
 generator: freely, or for a sheet, a layered part, a strut frame or a round part 1-10° for two
-thirds of those), whether
-the surface is wrinkled and whether the shape grew spikes (``--spikes``). A trainer given several
-folders draws every sample alike, so the last row (all folders) is the mix a run sees.
+thirds of those), whether the surface is wrinkled and whether the shape grew spikes
+(``--spikes``). A trainer given several folders draws every sample alike, so the last row (all
+folders) is the mix a run sees.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Score an AGNDC checkpoint on the generated validation family, the thin sheets, the rows of
-# spikes, the layered caps and the pin plates, on the frames a shipping decision needs (docs/training.md,
-# "Evaluating"), and compare it with the shipped weights scored the same way:
+# spikes, the layered caps and the pin plates, on the frames a shipping decision needs
+# (docs/training.md, "Evaluating"), and compare it with the shipped weights scored the same way:
 #   bash research/score_validation.sh VAL OUT NAME [CHECKPOINT] [FRAMES]
-# VAL holds family/, family_b/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/, caps/ and pins/
+# VAL holds family/, family_b/, sheets/, sheets_b/, struts/, spikes/, spikes_thin/, caps/ and
+# pins/
 # (made by `bash research/score_validation.sh VAL data`: agndc val-data, 48 shapes, 48 more from
 # their own seeds (a second family, to check a choice made on the first), 24 sheets, 48 more
 # sheets from their own seeds (the sheets are the noisiest frame), 36 thin-strut shapes;
@@ -15,8 +16,8 @@
 # sheets_b": 64 / 128 the family centred, 64s / 128s on 3 shifted grids per shape, 64b the
 # second family centred, sheets / sheets_s the sheets at 64^3, sheets_b the second set of
 # sheets, struts the thin struts, spikes / spikes_thin the rows of cones at 64^3, caps the
-# layered caps at 64^3, pins the pin plates at 64^3. A finished frame is skipped. Results: OUT/NAME/FRAME/rows.csv, then
-# the comparison with OUT/shipped/FRAME.
+# layered caps at 64^3, pins the pin plates at 64^3. A finished frame is skipped. Results:
+# OUT/NAME/FRAME/rows.csv, then the comparison with OUT/shipped/FRAME.
 # Evaluations use every core: beside the CPU lineage, run this under `taskset -c 0`.
 set -euo pipefail
 cd "$(dirname "$0")/.."

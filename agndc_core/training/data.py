@@ -139,35 +139,40 @@ def sample_recipe(seed: int, resolution_range=RESOLUTION_RANGE, rotate_fraction=
         recipe["tilt_degrees"] = float(np.degrees(np.arccos(np.clip((np.trace(turn) - 1) / 2,
                                                                     -1, 1))))
     spike_rng = np.random.default_rng([seed, 1234, 9])
-    if spikes > 0 and spike_rng.random() < spikes and "sheet_voxels" not in recipe:
+    if spikes > 0 and spike_rng.random() < spikes and not _replaced(recipe):
         recipe.pop("wrinkles", None)
         recipe["spikes"] = True
     layer_rng = np.random.default_rng([seed, 1234, 11])
-    if (layered > 0 and layer_rng.random() < layered and "sheet_voxels" not in recipe
-            and not recipe.get("spikes")):
-        # placed by layered_shape itself, as sheets are: no second turn
-        recipe.pop("wrinkles", None)
-        recipe.pop("tilt_degrees", None)
-        recipe.update(family="layered", rotation=np.eye(3).tolist(),
-                      axis_aligned=generator_aligned,
-                      layer_voxels=float(layer_rng.uniform(*LAYER_VOXELS)))
+    if layered > 0 and layer_rng.random() < layered and not _replaced(recipe):
+        _placed_by_its_shape(recipe, "layered", generator_aligned,
+                             layer_voxels=float(layer_rng.uniform(*LAYER_VOXELS)))
     strut_rng = np.random.default_rng([seed, 1234, 13])
-    if (struts > 0 and strut_rng.random() < struts and "sheet_voxels" not in recipe
-            and not recipe.get("spikes") and "layer_voxels" not in recipe):
-        recipe.pop("wrinkles", None)
-        recipe.pop("tilt_degrees", None)
-        recipe.update(family="struts", rotation=np.eye(3).tolist(),
-                      axis_aligned=generator_aligned, struts=True)
+    if struts > 0 and strut_rng.random() < struts and not _replaced(recipe):
+        _placed_by_its_shape(recipe, "struts", generator_aligned, struts=True)
     round_rng = np.random.default_rng([seed, 1234, 17])
-    if (rounds > 0 and round_rng.random() < rounds and "sheet_voxels" not in recipe
-            and not recipe.get("spikes") and "layer_voxels" not in recipe
-            and not recipe.get("struts")):
-        recipe.pop("wrinkles", None)
-        recipe.pop("tilt_degrees", None)
-        # placed by round_shape itself, on the grid axes for most seeds
-        recipe.update(family="round", rotation=np.eye(3).tolist(),
-                      axis_aligned=round_aligned(seed), rounds=True)
+    if rounds > 0 and round_rng.random() < rounds and not _replaced(recipe):
+        # on the grid axes for most seeds
+        _placed_by_its_shape(recipe, "round", round_aligned(seed), rounds=True)
     return recipe
+
+
+#: the recipe fields of the kinds whose shape replaces the generator's (``sample_recipe``): a
+#: seed becomes one of them at most, the first whose draw takes it
+REPLACING_KINDS = ("sheet_voxels", "spikes", "layer_voxels", "struts", "rounds")
+
+
+def _replaced(recipe: dict) -> bool:
+    """Whether an earlier kind already replaced the recipe's shape."""
+    return any(field in recipe for field in REPLACING_KINDS)
+
+
+def _placed_by_its_shape(recipe: dict, family: str, axis_aligned: bool, **fields) -> None:
+    """Make ``recipe`` a ``family`` sample whose shape function places it (as sheets are): no
+    second turn, no wrinkles; ``fields`` name the kind and its parameters."""
+    recipe.pop("wrinkles", None)
+    recipe.pop("tilt_degrees", None)
+    recipe.update(family=family, rotation=np.eye(3).tolist(), axis_aligned=axis_aligned,
+                  **fields)
 
 
 def wrinkle_mesh(vertices: np.ndarray, faces: np.ndarray, wrinkles: dict):
